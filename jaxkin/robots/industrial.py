@@ -1,0 +1,1 @@
+"""Industrial arms from their published DH parameters (filled in by the zoo work)."""

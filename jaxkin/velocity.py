@@ -1,0 +1,115 @@
+"""End-effector velocities and the classification of rigid-body motion.
+
+A twist is ``V = [v; omega]`` (linear first), shape (6,). ``reference`` has the meaning of
+:mod:`jaxkin.jacobians` (``world_aligned``: velocity of the frame origin in world axes).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import JaxkinError, ShapeError
+from .jacobians import geometric_jacobian
+from .kinematics import check_q
+from .model import Robot
+
+__all__ = [
+    "MOTION_KINDS",
+    "classify_motion",
+    "classify_twist",
+    "point_velocity",
+    "twist",
+]
+
+MOTION_KINDS = ("rest", "pure_translation", "pure_rotation", "general")
+
+
+def twist(
+    robot: Robot,
+    q: Any,
+    qd: Any,
+    frame: int | str | None = None,
+    reference: str = "world_aligned",
+    point: Any = None,
+) -> jax.Array:
+    """Twist ``[v; omega] = J(q) @ qd`` of ``frame`` (default: the tip); shape (6,).
+
+    ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``.
+    """
+    qd = check_q(robot, qd, what="qd", fn="jk.twist")
+    J = geometric_jacobian(robot, q, frame=frame, point=point, reference=reference)
+    return J @ qd.astype(J.dtype)
+
+
+def point_velocity(
+    robot: Robot, q: Any, qd: Any, point: Any, frame: int | str | None = None
+) -> jax.Array:
+    """Velocity (3,) in world axes of a point fixed to ``frame``, given as an offset (3,) from the
+    frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``."""
+    return twist(robot, q, qd, frame=frame, point=point)[:3]
+
+
+def _check_twist(V) -> jax.Array:
+    V = jnp.asarray(V)
+    if V.shape != (6,):
+        raise ShapeError(f"a twist must have shape (6,) ([v; omega]), got {V.shape}.")
+    return V
+
+
+def classify_twist(V: Any, tol: float = 1e-9) -> str:
+    """Classify an instantaneous rigid-body motion given by its twist ``[v; omega]`` at a point.
+
+    * ``"rest"``: v = 0 and omega = 0;
+    * ``"pure_translation"``: omega = 0, v != 0 (every point has the same velocity);
+    * ``"pure_rotation"``: omega != 0 and v . omega = 0: some point is momentarily at rest
+      (rotation about an instantaneous axis, zero screw pitch);
+    * ``"general"``: omega != 0 and v . omega != 0 (a screw motion: no point is at rest).
+
+    ``tol`` is absolute on |omega| and |v| and relative on the pitch ``|v . omega| / |omega|^2``.
+    Host-side: returns a Python string, so call it outside ``jit``.
+    """
+    V = np.asarray(_check_twist(V), dtype=float)
+    v, w = V[:3], V[3:]
+    nw, nv = np.linalg.norm(w), np.linalg.norm(v)
+    if nw <= tol:
+        return "rest" if nv <= tol else "pure_translation"
+    pitch_speed = abs(float(v @ w)) / nw  # speed along the screw axis
+    return "pure_rotation" if pitch_speed <= tol * max(1.0, nv) else "general"
+
+
+def classify_motion(Ts: Any, tol: float = 1e-9) -> str:
+    """Classify a finite rigid-body motion given as a trajectory of poses (the chapter's 4.2).
+
+    ``Ts`` (N, 4, 4) are the poses ``T_world_body`` at N >= 2 instants.
+
+    * ``"rest"``: all poses equal;
+    * ``"pure_translation"``: the orientation never changes (every point of the body follows the
+      same path, as the Ferris-wheel cabin of practice question 3c);
+    * ``"pure_rotation"``: one body point stays fixed in space throughout (the paths of all points
+      are arcs about it, practice question 3a);
+    * ``"general"``: neither (rotation and translation together, e.g. a rolling wheel, 3b).
+
+    The fixed point ``c`` solves ``R_k c + p_k = w`` for all k in least squares (unknowns: ``c``
+    in body axes, ``w`` in world axes); the motion is a pure rotation when the residual is within
+    ``tol * (1 + max |p|)``.
+    """
+    Ts = np.asarray(Ts, dtype=float)
+    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
+        raise ShapeError(f"Ts must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
+    if not np.all(np.isfinite(Ts)):
+        raise JaxkinError("Ts contains non-finite values.")
+    R, p = Ts[:, :3, :3], Ts[:, :3, 3]
+    scale = 1.0 + float(np.max(np.abs(p)))
+    same_R = np.max(np.abs(R - R[0])) <= tol
+    if same_R:
+        return "rest" if np.max(np.abs(p - p[0])) <= tol * scale else "pure_translation"
+    n = Ts.shape[0]
+    A = np.concatenate([R, -np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
+    b = -p.reshape(3 * n)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    residual = float(np.max(np.abs(A @ sol - b)))
+    return "pure_rotation" if residual <= tol * scale else "general"
