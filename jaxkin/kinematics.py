@@ -150,7 +150,9 @@ def forward_pass(robot: Robot, q: jax.Array) -> ForwardPass:
     Rs = [base[:3, :3]]
     ps = [base[:3, 3]]
     zs, os = [], []
-    for j, (kind, parent, qi) in enumerate(zip(robot.kinds, robot.parents, robot.q_index)):
+    for j, (kind, parent, qi) in enumerate(
+        zip(robot.kinds, robot.parents, robot.q_index, strict=True)
+    ):
         R, p = Rs[parent], ps[parent]
         if place.B is not None:
             p = p + R @ place.B[1][j]
@@ -190,7 +192,7 @@ def forward_pass(robot: Robot, q: jax.Array) -> ForwardPass:
 
 def _to_T(R: jax.Array, p: jax.Array) -> jax.Array:
     top = jnp.concatenate([R, p[..., :, None]], axis=-1)
-    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], dtype=R.dtype), R.shape[:-2] + (1, 4))
+    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], dtype=R.dtype), (*R.shape[:-2], 1, 4))
     return jnp.concatenate([top, bottom], axis=-2)
 
 

@@ -78,9 +78,9 @@ class Robot:
     ``joint_names`` (one per entry of ``q``), ``frame_names`` (``fk_all``'s order, base first),
     ``has_tool``, ``configurations`` (named joint vectors).
 
-    Attributes (float leaves): ``params`` (dict of per-joint parameter arrays), ``axis`` (n, 3),
-    ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (dof,), ``base`` (4, 4) = T_world_base,
-    ``tool`` (4, 4) = T_flange_tool.
+    Attributes (float leaves): ``params`` (dict of per-joint parameter arrays), ``axis``
+    (n, 3), ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (dof,), ``base`` (4, 4) =
+    T_world_base, ``tool`` (4, 4) = T_flange_tool.
     """
 
     params: dict[str, jax.Array]
@@ -124,9 +124,9 @@ class Robot:
     @classmethod
     def tree_unflatten(cls, aux, children):
         obj = object.__new__(cls)
-        for k, v in zip(cls._LEAVES, children):
+        for k, v in zip(cls._LEAVES, children, strict=True):
             object.__setattr__(obj, k, v)
-        for k, v in zip(cls._STATIC, aux):
+        for k, v in zip(cls._STATIC, aux, strict=True):
             object.__setattr__(obj, k, v)
         return obj
 

@@ -1,0 +1,267 @@
+"""Tools for property-based tests of kinematics: hypothesis strategies and invariant checks.
+
+Requires ``hypothesis`` (``pip install jaxkin[test]``). Use in your own tests::
+
+    from hypothesis import given
+    import jaxkin.testing as jkt
+
+    @given(jkt.robots_and_configurations(max_joints=7))
+    def test_my_property(robot_and_q):
+        robot, q = robot_and_q
+        jkt.assert_jacobian_consistent(robot, q)
+
+The finite-difference oracle :func:`finite_difference_jacobian` works on SE(3) and needs float64
+(``jax.config.update("jax_enable_x64", True)``); do not finite-difference in float32.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import spatial
+from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
+from .kinematics import check_q, forward_pass
+from .model import Robot
+
+try:
+    from hypothesis import strategies as st
+except ImportError as exc:  # pragma: no cover - exercised only without the test extra
+    raise ImportError(
+        "jaxkin.testing needs hypothesis: pip install 'jaxkin[test]' (or pip install hypothesis)."
+    ) from exc
+
+__all__ = [
+    "assert_jacobian_consistent",
+    "configurations",
+    "dh_robots",
+    "dh_rows",
+    "finite_difference_jacobian",
+    "robots_and_configurations",
+    "rotations",
+    "transforms",
+    "tree_robots",
+    "unit_vectors",
+]
+
+_SPECIAL_ANGLES = (0.0, math.pi / 2, -math.pi / 2, math.pi)
+
+
+def _angle(special: bool = True) -> st.SearchStrategy[float]:
+    base = st.floats(-math.pi, math.pi, allow_nan=False)
+    if special:
+        return st.one_of(st.sampled_from(_SPECIAL_ANGLES), base)
+    return base
+
+
+def _length(scale: float = 1.0) -> st.SearchStrategy[float]:
+    return st.one_of(st.just(0.0), st.floats(-scale, scale, allow_nan=False))
+
+
+def unit_vectors() -> st.SearchStrategy[np.ndarray]:
+    """Unit 3-vectors (numpy float64), including the coordinate axes."""
+    axes = st.sampled_from([np.eye(3)[i] * s for i in range(3) for s in (1.0, -1.0)])
+    gaussian = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).map(np.array)
+    gaussian = gaussian.filter(lambda v: np.linalg.norm(v) > 1e-3)
+    return st.one_of(axes, gaussian.map(lambda v: v / np.linalg.norm(v)))
+
+
+def rotations() -> st.SearchStrategy[np.ndarray]:
+    """Rotation matrices (3, 3), numpy float64: random axis and angle in [0, pi], ends included."""
+    angle = st.one_of(st.sampled_from([0.0, math.pi, 1e-9, math.pi - 1e-9]), _angle(False))
+    return st.builds(
+        lambda ax, t: np.asarray(spatial.exp_so3(jnp.asarray(ax * abs(t), dtype=jnp.float64))),
+        unit_vectors(),
+        angle,
+    )
+
+
+def transforms(scale: float = 1.0) -> st.SearchStrategy[np.ndarray]:
+    """Homogeneous transforms (4, 4), numpy float64."""
+
+    def make(R, p):
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = p
+        return T
+
+    return st.builds(make, rotations(), st.tuples(*[_length(scale)] * 3).map(np.array))
+
+
+@st.composite
+def dh_rows(draw, min_joints: int = 1, max_joints: int = 12, prismatic: bool = True):
+    """A DH table (list of row dicts) with mixed revolute/prismatic joints and finite limits."""
+    n = draw(st.integers(min_joints, max_joints))
+    rows = []
+    for _ in range(n):
+        kind = draw(st.sampled_from(["revolute", "prismatic"])) if prismatic else "revolute"
+        row = dict(
+            a=draw(_length()),
+            alpha=draw(_angle()),
+            d=draw(_length()),
+            theta=draw(_angle()),
+            joint=kind,
+            offset=draw(st.one_of(st.just(0.0), st.floats(-1, 1, allow_nan=False))),
+        )
+        if kind == "revolute":
+            row.update(lower=-math.pi, upper=math.pi)
+        else:
+            row.update(lower=-1.0, upper=1.0)
+        rows.append(row)
+    return rows
+
+
+@st.composite
+def dh_robots(
+    draw,
+    min_joints: int = 1,
+    max_joints: int = 12,
+    convention: str | None = None,
+    prismatic: bool = True,
+    dtype: Any = None,
+):
+    """Random DH robots (standard or modified, random base and tool transforms)."""
+    rows = draw(dh_rows(min_joints, max_joints, prismatic))
+    conv = convention or draw(st.sampled_from(["standard", "modified"]))
+    base = draw(st.one_of(st.none(), transforms()))
+    tool = draw(st.one_of(st.none(), transforms(0.3)))
+    return Robot.from_dh(rows, convention=conv, base=base, tool=tool, dtype=dtype)
+
+
+@st.composite
+def tree_robots(draw, min_joints: int = 1, max_joints: int = 10, dtype: Any = None):
+    """Random URDF-style robots: trees with revolute, prismatic and fixed joints, arbitrary axes."""
+    n = draw(st.integers(min_joints, max_joints))
+    joints = []
+    frames = ["root"]
+    for j in range(n):
+        kind = draw(st.sampled_from(["revolute", "revolute", "prismatic", "fixed"]))
+        if j == n - 1 and all(s["type"] == "fixed" for s in joints):
+            kind = "revolute"
+        parent = draw(st.sampled_from(frames))
+        spec = dict(
+            name=f"j{j}",
+            type=kind,
+            parent=parent,
+            child=f"f{j}",
+            xyz=tuple(draw(st.tuples(*[_length(0.5)] * 3))),
+            rpy=tuple(draw(st.tuples(*[_angle()] * 3))),
+            axis=tuple(draw(unit_vectors())),
+        )
+        if kind == "revolute":
+            spec.update(lower=-math.pi, upper=math.pi)
+        elif kind == "prismatic":
+            spec.update(lower=-1.0, upper=1.0)
+        joints.append(spec)
+        frames.append(spec["child"])
+    base = draw(st.one_of(st.none(), transforms()))
+    return Robot.from_joints(joints, root="root", base=base, name="random_tree", dtype=dtype)
+
+
+def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.ndarray]:
+    """Joint vectors (dof,) within the robot's limits (infinite limits: [-pi, pi] or [-1, 1])."""
+    lo = np.asarray(robot.lower, dtype=float)
+    hi = np.asarray(robot.upper, dtype=float)
+    kinds = robot.joint_kinds
+    elems = []
+    for i in range(robot.dof):
+        default = math.pi if kinds[i] == "revolute" else 1.0
+        a = lo[i] if np.isfinite(lo[i]) else -default
+        b = hi[i] if np.isfinite(hi[i]) else default
+        a, b = a + margin * (b - a), b - margin * (b - a)
+        elems.append(st.floats(a, b, allow_nan=False))
+    return st.tuples(*elems).map(lambda t: np.array(t, dtype=float))
+
+
+def robots_and_configurations(
+    min_joints: int = 1, max_joints: int = 12, kind: str = "any", dtype: Any = None
+):
+    """Pairs ``(robot, q)``: random DH or tree robots and a configuration within limits."""
+    if kind == "dh":
+        robots = dh_robots(min_joints, max_joints, dtype=dtype)
+    elif kind == "tree":
+        robots = tree_robots(min_joints, max_joints, dtype=dtype)
+    else:
+        robots = st.one_of(
+            dh_robots(min_joints, max_joints, dtype=dtype),
+            tree_robots(min_joints, max_joints, dtype=dtype),
+        )
+    return robots.flatmap(lambda r: st.tuples(st.just(r), configurations(r)))
+
+
+def finite_difference_jacobian(
+    robot: Robot,
+    q: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+    h: float = 1e-6,
+) -> np.ndarray:
+    """Central finite differences on SE(3): an oracle independent of any Jacobian code.
+
+    Linear rows: ``(p(q + h e_k) - p(q - h e_k)) / 2h`` of the (offset) point; angular rows:
+    ``log(R(q + h e_k) R(q - h e_k)^T) / 2h``. Float64 only; error about ``h^2`` plus
+    ``eps / h`` (1e-9 .. 1e-10 at h = 1e-6).
+    """
+    if not jax.config.read("jax_enable_x64"):
+        raise RuntimeError("finite_difference_jacobian needs jax_enable_x64 (float64).")
+    robot = robot.astype(np.float64)
+    q = check_q(robot, q, fn="finite_difference_jacobian").astype(jnp.float64)
+    f = robot.frame_index(frame)
+    pt = None if point is None else jnp.asarray(point, dtype=jnp.float64)
+
+    def pose(qq):
+        fp = forward_pass(robot, qq)
+        R, p = fp.R[f], fp.p[f]
+        return (p if pt is None else p + R @ pt), R
+
+    eye = jnp.eye(robot.dof, dtype=jnp.float64)
+    p_plus, R_plus = jax.vmap(pose)(q[None, :] + h * eye)
+    p_minus, R_minus = jax.vmap(pose)(q[None, :] - h * eye)
+    Jv = ((p_plus - p_minus) / (2 * h)).T
+    Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus) / (2 * h)).T
+    p0, R0 = pose(q)
+    if reference == "local":
+        Jv, Jw = R0.T @ Jv, R0.T @ Jw
+    elif reference == "world":
+        Jv = Jv + spatial.skew(p0) @ Jw
+    return np.asarray(jnp.concatenate([Jv, Jw], axis=0))
+
+
+def assert_jacobian_consistent(
+    robot: Robot,
+    q: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    references: tuple[str, ...] = REFERENCES,
+    atol: float | None = None,
+    fd_atol: float = 1e-7,
+    finite_differences: bool | None = None,
+) -> None:
+    """Assert hand-built == jacfwd == jacrev (``atol``) == finite differences (``fd_atol``).
+
+    ``atol`` defaults to ``1e-12 * max(1, reach)`` in float64 and ``1e-5 * max(1, reach)`` in
+    float32, reach being the largest distance of a frame from the base. Finite differences run
+    only in float64 (default: whenever x64 is on and the robot is float64).
+    """
+    dtype = np.dtype(jnp.result_type(robot.base.dtype, jnp.asarray(q).dtype))
+    is64 = dtype == np.float64
+    Ts = forward_pass(robot, check_q(robot, q, fn="assert_jacobian_consistent"))
+    reach = float(jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1)))
+    tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
+    fd = finite_differences if finite_differences is not None else is64
+    for ref in references:
+        J = np.asarray(geometric_jacobian(robot, q, frame=frame, point=point, reference=ref))
+        assert np.all(np.isfinite(J)), f"non-finite Jacobian ({ref})"
+        Jf = np.asarray(jacobian_fwd(robot, q, frame=frame, point=point, reference=ref))
+        Jr = np.asarray(jacobian_rev(robot, q, frame=frame, point=point, reference=ref))
+        np.testing.assert_allclose(J, Jf, rtol=0, atol=tol, err_msg=f"hand-built vs jacfwd ({ref})")
+        np.testing.assert_allclose(J, Jr, rtol=0, atol=tol, err_msg=f"hand-built vs jacrev ({ref})")
+        if fd:
+            Jd = finite_difference_jacobian(robot, q, frame=frame, point=point, reference=ref)
+            scale = fd_atol * max(1.0, reach)
+            np.testing.assert_allclose(J, Jd, rtol=0, atol=scale, err_msg=f"vs FD ({ref})")

@@ -1,0 +1,216 @@
+"""jaxkin.batch: chunked_map against one plain vmap, compile-once, validation, out=, progress."""
+
+import io
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxkin as jk
+from jaxkin.batch import MapStats, ProgressBar, chunked_map
+
+
+def row_fn(x, y):
+    """Per-row: x (3,), y () -> a pytree with a (3, 3), a scalar and a (2,) leaf."""
+    return {
+        "outer": jnp.outer(x, x) * y,
+        "pair": (jnp.log(y) + jnp.sum(jnp.sqrt(x)), jnp.stack([x[0] * y, x[2] - y])),
+    }
+
+
+def inputs(n, dtype=np.float64, seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.1, 2.0, (n, 3)).astype(dtype), rng.uniform(0.5, 1.5, n).astype(dtype)
+
+
+def reference(x, y):
+    """row_fn over all rows, in numpy."""
+    return {
+        "outer": x[:, :, None] * x[:, None, :] * y[:, None, None],
+        "pair": (np.log(y) + np.sum(np.sqrt(x), axis=1), np.stack([x[:, 0] * y, x[:, 2] - y], 1)),
+    }
+
+
+def assert_tree_equal(got, want, **tol):
+    assert jax.tree_util.tree_structure(got) == jax.tree_util.tree_structure(want)
+    for g, w in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want), strict=True):
+        assert isinstance(g, np.ndarray)
+        assert g.shape == w.shape and g.dtype == w.dtype
+        np.testing.assert_allclose(g, np.asarray(w), **tol)
+
+
+def test_matches_plain_vmap():
+    x, y = inputs(13)
+    got = chunked_map(row_fn, x, y, chunk_size=4)
+    assert_tree_equal(got, jax.vmap(row_fn)(x, y), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("n", [1, 3, 4, 5, 12, 30])
+def test_matches_whole_batch(n):
+    # N = 1, N < chunk, N = chunk, N not a multiple of chunk, N a multiple of chunk.
+    x, y = inputs(n)
+    got = chunked_map(row_fn, x, y, chunk_size=4)
+    assert_tree_equal(got, reference(x, y), rtol=1e-14, atol=0)
+
+
+def test_float32_and_jax_inputs():
+    x, y = inputs(9, np.float32)
+    got = chunked_map(row_fn, jnp.asarray(x), y, chunk_size=4)
+    assert got["outer"].dtype == np.float32
+    assert_tree_equal(got, reference(x, y), rtol=1e-6)
+
+
+def test_compiles_once_across_chunks_and_padding():
+    traces = []
+
+    def fn(x, y):
+        traces.append(x.shape)
+        return row_fn(x, y)
+
+    x, y = inputs(10)
+    _, stats = chunked_map(fn, x, y, chunk_size=3, return_stats=True)
+    assert len(traces) == 1  # one trace for 4 chunks, the last one padded
+    assert stats == MapStats(
+        n=10,
+        chunk_size=3,
+        n_chunks=4,
+        padding=2,
+        compile_seconds=stats.compile_seconds,
+        run_seconds=stats.run_seconds,
+    )
+    assert stats.compile_seconds > 0 and stats.rate > 0
+
+
+@pytest.mark.parametrize(
+    ("n", "chunk_size", "expected"),
+    [(5, 65536, (5, 1, 0)), (12, 4, (4, 3, 0)), (13, 4, (4, 4, 3)), (9, 8, (5, 2, 1))],
+)
+def test_chunking_has_minimal_padding(n, chunk_size, expected):
+    x, y = inputs(n)
+    _, stats = chunked_map(row_fn, x, y, chunk_size=chunk_size, return_stats=True)
+    assert (stats.chunk_size, stats.n_chunks, stats.padding) == expected
+
+
+def test_padding_rows_are_valid_inputs():
+    # The last chunk is padded by repeating the last row, so fn never sees zeros (log(0) = -inf
+    # would be harmless here, but a user's fn might raise or poison shared state).
+    seen = []
+
+    def fn(x):
+        jax.debug.callback(lambda v: seen.append(np.asarray(v)), x)
+        return jnp.log(x)
+
+    x = np.arange(1.0, 8.0)  # 7 rows, chunk 4: one padding row
+    out = chunked_map(fn, x, chunk_size=4)
+    np.testing.assert_allclose(out, np.log(x))
+    assert min(float(np.min(s)) for s in seen) >= 1.0
+
+
+def test_empty_batch():
+    x, y = inputs(0)
+    got = chunked_map(row_fn, x, y, chunk_size=4)
+    assert got["outer"].shape == (0, 3, 3)
+    assert got["pair"][1].shape == (0, 2)
+
+
+def test_out_memmap(tmp_path):
+    n = 11
+    x, y = inputs(n)
+    out = {
+        "outer": np.lib.format.open_memmap(tmp_path / "outer.npy", "w+", np.float64, (n, 3, 3)),
+        "pair": (np.zeros(n), np.zeros((n, 2))),
+    }
+    got = chunked_map(row_fn, x, y, chunk_size=4, out=out)
+    assert got is out
+    out["outer"].flush()
+    want = reference(x, y)
+    np.testing.assert_allclose(np.load(tmp_path / "outer.npy"), want["outer"], rtol=1e-14)
+    np.testing.assert_allclose(out["pair"][1], want["pair"][1], rtol=1e-14)
+
+
+# ---------------------------------------------------------------------- bad input
+def test_unequal_lengths():
+    x, _ = inputs(5)
+    with pytest.raises(jk.ShapeError, match=r"same leading length.*\(5, 3\).*\(4,\)"):
+        chunked_map(row_fn, x, np.ones(4))
+
+
+def test_no_arrays_and_scalars():
+    with pytest.raises(jk.ShapeError, match="at least one input"):
+        chunked_map(row_fn)
+    with pytest.raises(jk.ShapeError, match="leading batch axis"):
+        chunked_map(row_fn, np.ones((3, 3)), 1.0)
+
+
+@pytest.mark.parametrize("bad", [0, -4, 2.5, True, "8", None])
+def test_bad_chunk_size(bad):
+    x, y = inputs(3)
+    with pytest.raises(jk.JaxkinError, match="chunk_size must be"):
+        chunked_map(row_fn, x, y, chunk_size=bad)
+
+
+def test_fn_not_callable():
+    with pytest.raises(jk.JaxkinError, match="fn must be callable"):
+        chunked_map(np.ones(3), np.ones(3))
+
+
+def test_bad_out():
+    x, y = inputs(4)
+    good_pair = (np.zeros(4), np.zeros((4, 2)))
+    with pytest.raises(jk.ShapeError, match="structure of fn's output"):
+        chunked_map(row_fn, x, y, out=[np.zeros(4)])
+    with pytest.raises(jk.ShapeError, match=r"out\['outer'\].*shape \(4, 3, 3\).*\(4, 3\)"):
+        chunked_map(row_fn, x, y, out={"outer": np.zeros((4, 3)), "pair": good_pair})
+    with pytest.raises(jk.ShapeError, match="cannot hold"):
+        out = {"outer": np.zeros((4, 3, 3), np.int64), "pair": good_pair}
+        chunked_map(row_fn, x, y, out=out)
+    ro = np.zeros((4, 3, 3))
+    ro.flags.writeable = False
+    with pytest.raises(jk.ShapeError, match="read-only"):
+        chunked_map(row_fn, x, y, out={"outer": ro, "pair": good_pair})
+
+
+# ---------------------------------------------------------------------- progress bar
+class FakeTTY(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_bar_draws_on_tty_and_when_forced():
+    for stream, force in ((FakeTTY(), False), (io.StringIO(), True)):
+        bar = ProgressBar(10, "work", unit="cfg", file=stream, force=force, min_interval=0)
+        x, y = inputs(10)
+        chunked_map(row_fn, x, y, chunk_size=4, progress=bar)
+        text = stream.getvalue()
+        assert "work" in text and "10/10" in text and "100.0%" in text and "cfg/s" in text
+        assert "4/10" in text and text.endswith("\n")
+
+
+def test_progress_bar_silent():
+    for bar in (
+        ProgressBar(10, file=io.StringIO()),  # not a terminal, not forced
+        ProgressBar(10, file=FakeTTY(), enabled=False),
+    ):
+        bar.update(10)
+        bar.close()
+        assert bar.file.getvalue() == ""
+
+
+def test_progress_bar_rate_limited():
+    stream = FakeTTY()
+    with ProgressBar(1000, file=stream, min_interval=3600) as bar:
+        for _ in range(999):
+            bar.update(1)
+        assert stream.getvalue().count("\r") == 1  # the first update only
+        bar.update(1)  # the last one always draws
+    assert stream.getvalue().count("\r") == 2  # close does not repeat it
+    assert stream.getvalue().count("\n") == 1
+
+
+def test_progress_bar_close_draws_unfinished_state():
+    stream = FakeTTY()
+    with ProgressBar(10, file=stream, min_interval=3600) as bar:
+        bar.update(3)
+        bar.update(2)  # not drawn (too soon)
+    assert "5/10" in stream.getvalue() and stream.getvalue().endswith("\n")
