@@ -31,15 +31,17 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function") ->
             q = np.asarray(q, dtype=float)
         except (TypeError, ValueError):
             raise ShapeError(f"{what} must be a sequence of numbers, got {q!r}.") from None
-    shape = getattr(q, "shape", None)
-    if shape is None:
-        q = jnp.asarray(q)
-        shape = q.shape
-    dtype = np.dtype(getattr(q, "dtype", np.float64))
+    if not (hasattr(q, "shape") and hasattr(q, "dtype")):
+        try:
+            q = np.asarray(q)
+        except (TypeError, ValueError):
+            raise ShapeError(f"{what} must be an array of numbers, got {q!r}.") from None
+    shape = q.shape
+    dtype = np.dtype(q.dtype)
     if dtype.kind == "c":
         raise ShapeError(f"{what} must be real, got complex dtype {dtype}.")
     if dtype.kind not in "fiub":
-        raise ShapeError(f"{what} must be a float array, got dtype {dtype}.")
+        raise ShapeError(f"{what} must be an array of numbers, got dtype {dtype} ({q!r:.60}).")
     if tuple(shape) != (robot.dof,):
         hint = ""
         if len(shape) >= 2 and shape[-1] == robot.dof:
