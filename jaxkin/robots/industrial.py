@@ -94,7 +94,7 @@ def scara(dtype=None) -> Robot:
     "Stanford arm (Scheinman), RRPRRR with a spherical wrist; standard DH.",
     "d1 = 0.412 m, d2 = 0.154 m, theta3, a3, the 12..50 inch boom travel and the joint limits as "
     "in P. Corke, Robotics Toolbox for Python, roboticstoolbox.models.DH.Stanford (which cites "
-    "Stanford AIM-177, Fig. 2.3, and Paul 1981, Tables 6.5-6.6); structure as Spong, Hutchinson "
+    "Stanford AIM-177, Fig. 2.3, for the kinematics); structure as Spong, Hutchinson "
     "& Vidyasagar 2006, Section 3.3, Table 3.4 (Stanford manipulator).",
 )
 def stanford(dtype=None) -> Robot:
@@ -114,12 +114,12 @@ def stanford(dtype=None) -> Robot:
     ====  =========  ========  =========  ==================  =========================
 
     Source: the numbers of P. Corke's Robotics Toolbox (``roboticstoolbox.models.DH.Stanford``,
-    kinematics credited to "Modelling, trajectory calculation and servoing of a computer
-    controlled arm", Stanford AIM-177, Fig. 2.3, and R. P. Paul, *Robot Manipulators* (1981),
-    Tables 6.5-6.6). The link structure is that of Spong, Hutchinson & Vidyasagar (2006),
-    Section 3.3, Table 3.4 (which has theta3 = 0 and a3 = 0 with symbolic lengths; the toolbox's
-    theta3 = -pi/2 and a3 = 0.0203 m are kept so that the two models coincide). The tool frame is
-    the wrist centre (d6 = 0).
+    whose kinematic data are credited to "Modelling, trajectory calculation and servoing of a
+    computer controlled arm", Stanford AIM-177, Fig. 2.3; its dynamic data, not used here, to
+    R. P. Paul, *Robot Manipulators* (1981), Tables 6.5-6.6). The link structure is that of
+    Spong, Hutchinson & Vidyasagar (2006), Section 3.3, Table 3.4 (which has theta3 = 0 and
+    a3 = 0 with symbolic lengths; the toolbox's theta3 = -pi/2 and a3 = 0.0203 m are kept so that
+    the two models coincide). The tool frame is the wrist centre (d6 = 0).
 
     Named configurations:
 
