@@ -24,17 +24,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import shutil
 import sys
+import tempfile
 import time
-from collections.abc import Callable
+import zipfile
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any, TextIO
 
 import jax
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .errors import JaxkinError, ShapeError
 
-__all__ = ["MapStats", "ProgressBar", "chunked_map"]
+__all__ = ["MapStats", "ProgressBar", "chunked_map", "stream_map"]
 
 DEFAULT_CHUNK_SIZE = 65536
 
@@ -186,6 +191,7 @@ def chunked_map(
     progress: bool | ProgressBar = False,
     out: Any = None,
     return_stats: bool = False,
+    devices: Any = None,
 ):
     """``jax.vmap(fn)(*arrays)`` evaluated chunk by chunk, with results in host numpy arrays.
 
@@ -206,8 +212,18 @@ def chunked_map(
       progress: True for a :class:`ProgressBar` on stderr (shown on a terminal only), or a
         :class:`ProgressBar` to update (its ``total`` should be ``N``).
       out: optional pytree of writable arrays (e.g. ``np.memmap``) with the structure of ``fn``'s
-        output and leaf shapes ``(N, *leaf_shape)``, into which results are written.
+        output and leaf shapes ``(N, *leaf_shape)``, into which results are written; or a path:
+        ``"results.npz"`` (an uncompressed npz) or a directory (one ``.npy`` per output leaf,
+        loadable with ``np.load(..., mmap_mode="r")``). Path outputs are written chunk by chunk
+        to disk (never held in memory, so they may exceed it) and appear atomically at the end;
+        the function then returns the path.
       return_stats: also return a :class:`MapStats` with compile and run times.
+      devices: where each chunk runs. None (default) or ``"all"``: every device JAX sees
+        (``jax.devices()``: all GPUs, or all hosts' devices after ``jax.distributed.initialize``);
+        a sequence of devices; or a 1-D ``jax.sharding.Mesh``. With more than one device each
+        chunk is split along its rows with a ``NamedSharding`` (the chunk is rounded up to a
+        multiple of the device count) and the compiled call runs on all of them at once.
+        Test on a CPU with ``XLA_FLAGS=--xla_force_host_platform_device_count=4``.
 
     Returns:
       The pytree ``fn`` returns, each leaf a numpy array of shape ``(N, *leaf_shape)`` (``out``
@@ -221,13 +237,20 @@ def chunked_map(
     if not callable(fn):
         raise JaxkinError(f"chunked_map: fn must be callable, got {type(fn).__name__}.")
     host, n = _check_inputs(arrays)
-    chunk, n_chunks = _chunking(chunk_size, n)
+    mesh = _mesh(devices)
+    chunk, n_chunks = _chunking(chunk_size, n, mesh.size)
+    path = os.fspath(out) if isinstance(out, (str, os.PathLike)) else None
 
     bar = progress if isinstance(progress, ProgressBar) else ProgressBar(n, enabled=bool(progress))
+    writer = None
     try:
         t0 = time.perf_counter()
-        traced = _trace(fn, host, chunk)
-        results = _allocate(traced.out_info, n, out)  # checks out= before the costly compile
+        traced = _trace(fn, host, chunk, mesh)
+        if path is not None:
+            writer = _FileWriter(path, traced.out_info, n)
+            results = None
+        else:
+            results = _allocate(traced.out_info, n, out)  # checks out= before the compile
         if n_chunks:
             bar.note(f"compiling for chunks of {chunk:,} rows ...")
             compiled = traced.lower().compile()
@@ -239,16 +262,20 @@ def chunked_map(
         for k in range(n_chunks):
             start = k * chunk
             stop = min(start + chunk, n)
-            running = (start, stop, compiled(*_feed(host, start, chunk, n)))
+            running = (start, stop, compiled(*_feed(host, start, chunk, n, mesh)))
             if pending is not None:
-                _drain(results, *pending)
+                _drain(results if writer is None else writer, *pending)
                 bar.update(pending[1] - pending[0])
             pending = running
         if pending is not None:
-            _drain(results, *pending)
+            _drain(results if writer is None else writer, *pending)
             bar.update(pending[1] - pending[0])
+        if writer is not None:
+            results = writer.commit()
     finally:
         bar.close()
+        if writer is not None:
+            writer.abort()
     run_seconds = time.perf_counter() - t0
 
     if not return_stats:
@@ -262,6 +289,48 @@ def chunked_map(
         run_seconds=run_seconds,
     )
     return results, stats
+
+
+def stream_map(
+    fn: Callable[..., Any],
+    batches: Iterable[Any],
+    *,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    devices: Any = None,
+) -> Iterator[Any]:
+    """Apply a per-row ``fn`` to a stream of batches of any sizes, one compile for all.
+
+    ``batches`` yields arrays (or tuples of arrays, one per argument of ``fn``) with a leading
+    row axis; rows are regrouped into chunks of exactly ``chunk_size`` rows (the last one padded)
+    and each finished chunk's results are yielded as a pytree of numpy arrays (padding dropped),
+    in order. Memory holds about two chunks, whatever the stream's length: use it for
+    configurations generated on the fly or read from disk.
+    """
+    mesh = _mesh(devices)
+    chunk, _ = _chunking(chunk_size, max(int(chunk_size), 1), mesh.size)
+    compiled = None
+    buffer: list[list[np.ndarray]] = []
+    buffered = 0
+
+    def run(parts: list[list[np.ndarray]], rows: int):
+        host = [np.concatenate(cols) for cols in zip(*parts, strict=True)]
+        out = compiled(*_feed(host, 0, chunk, rows, mesh))
+        return jax.tree_util.tree_map(lambda x: np.asarray(x)[:rows], out)
+
+    for item in batches:
+        arrays = item if isinstance(item, tuple) else (item,)
+        host, _ = _check_inputs(arrays)
+        if compiled is None:
+            compiled = _trace(fn, host, chunk, mesh).lower().compile()
+        buffer.append(host)
+        buffered += host[0].shape[0]
+        while buffered >= chunk:
+            joined = [np.concatenate(cols) for cols in zip(*buffer, strict=True)]
+            yield run([[a[:chunk] for a in joined]], chunk)
+            rest = [a[chunk:] for a in joined]
+            buffer, buffered = ([rest], rest[0].shape[0]) if rest[0].shape[0] else ([], 0)
+    if buffered:
+        yield run(buffer, buffered)
 
 
 def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[np.ndarray], int]:
@@ -295,10 +364,9 @@ def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[np.ndarray], int]:
     return host, lengths[0]
 
 
-def _chunking(chunk_size: Any, n: int) -> tuple[int, int]:
+def _chunking(chunk_size: Any, n: int, n_devices: int = 1) -> tuple[int, int]:
     """(rows per chunk, number of chunks): the fewest chunks of at most ``chunk_size`` rows, all
-    of one size, so that padding is minimal. (Sharded execution will round the chunk up to a
-    multiple of the device count here.)"""
+    of one size, so that padding is minimal; rounded up to a multiple of ``n_devices``."""
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
         raise JaxkinError(
             f"chunked_map: chunk_size must be a positive integer, got {chunk_size!r} "
@@ -311,26 +379,54 @@ def _chunking(chunk_size: Any, n: int) -> tuple[int, int]:
         )
     n_chunks = -(-n // int(chunk_size))
     chunk = -(-n // n_chunks) if n_chunks else 1
+    chunk = -(-chunk // n_devices) * n_devices
     return chunk, n_chunks
 
 
-def _trace(fn: Callable[..., Any], host: list[np.ndarray], chunk: int) -> jax.stages.Traced:
+def _mesh(devices: Any) -> Mesh:
+    """A 1-D mesh (axis ``"rows"``) over the devices a chunk is split across."""
+    if isinstance(devices, Mesh):
+        if devices.devices.ndim != 1:
+            raise JaxkinError(
+                f"chunked_map: devices must be a 1-D mesh, got axes {devices.axis_names}."
+            )
+        return devices
+    if devices is None or (isinstance(devices, str) and devices == "all"):
+        devs = jax.devices()
+    elif isinstance(devices, str):
+        raise JaxkinError(
+            f"chunked_map: devices must be None, 'all', a sequence of devices or a Mesh, got "
+            f"{devices!r}."
+        )
+    else:
+        devs = list(devices)
+        if not devs:
+            raise JaxkinError("chunked_map: devices is empty; pass None to use every device.")
+    return Mesh(np.array(devs), ("rows",))
+
+
+def _trace(
+    fn: Callable[..., Any], host: list[np.ndarray], chunk: int, mesh: Mesh
+) -> jax.stages.Traced:
     """Trace ``jit(vmap(fn))`` for ``chunk`` rows (``.out_info``: output shapes; ``.lower()
-    .compile()``: the executable, which accepts exactly these shapes, so it never retraces)."""
-    specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype) for a in host]
-    return jax.jit(jax.vmap(fn)).trace(*specs)
+    .compile()``: the executable, which accepts exactly these shapes, so it never retraces).
+    Inputs and outputs are split along rows over ``mesh``."""
+    sharding = NamedSharding(mesh, PartitionSpec("rows"))
+    specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype, sharding=sharding) for a in host]
+    return jax.jit(jax.vmap(fn), out_shardings=sharding).trace(*specs)
 
 
-def _feed(host: list[np.ndarray], start: int, chunk: int, n: int) -> list[jax.Array]:
-    """Rows ``start : start + chunk`` of every input, on the device; past ``n`` the last row
-    repeats (padding)."""
+def _feed(host: list[np.ndarray], start: int, chunk: int, n: int, mesh: Mesh) -> list[jax.Array]:
+    """Rows ``start : start + chunk`` of every input, split over the mesh's devices; past ``n``
+    the last row repeats (padding)."""
     stop = start + chunk
     if stop <= n:
         rows = [a[start:stop] for a in host]
     else:
         index = np.minimum(np.arange(start, stop), n - 1)
         rows = [a[index] for a in host]
-    return [jax.device_put(r) for r in rows]
+    sharding = NamedSharding(mesh, PartitionSpec("rows"))
+    return [jax.device_put(r, sharding) for r in rows]
 
 
 def _allocate(out_info: Any, n: int, out: Any) -> Any:
@@ -365,10 +461,86 @@ def _allocate(out_info: Any, n: int, out: Any) -> Any:
     return out
 
 
+def _to_host(x: jax.Array) -> np.ndarray:
+    if jax.process_count() > 1 and not x.is_fully_addressable:
+        from jax.experimental import multihost_utils
+
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
+
+
 def _drain(results: Any, start: int, stop: int, device_out: Any) -> None:
-    """Copy rows ``0 : stop - start`` of a finished chunk into ``results[start:stop]``."""
+    """Copy rows ``0 : stop - start`` of a finished chunk into ``results[start:stop]`` (host
+    arrays) or append them to a :class:`_FileWriter`."""
+    if isinstance(results, _FileWriter):
+        results.append(jax.tree_util.tree_map(lambda x: _to_host(x)[: stop - start], device_out))
+        return
 
     def copy(dst: np.ndarray, src: jax.Array) -> None:
-        dst[start:stop] = np.asarray(src)[: stop - start]
+        dst[start:stop] = _to_host(src)[: stop - start]
 
     jax.tree_util.tree_map(copy, results, device_out)
+
+
+class _FileWriter:
+    """Writes each output leaf as a ``.npy`` file, chunk after chunk, then publishes them.
+
+    ``path`` ending in ``.npz``: an uncompressed npz (a zip of the ``.npy`` files); otherwise a
+    directory of ``.npy`` files. Everything is written to a temporary sibling first and renamed
+    into place at :meth:`commit`, so an interruption never leaves a half-written result.
+    """
+
+    def __init__(self, path: str, out_info: Any, n: int) -> None:
+        self.path = os.path.abspath(path)
+        parent = os.path.dirname(self.path) or "."
+        if not os.path.isdir(parent):
+            raise JaxkinError(f"chunked_map: directory {parent!r} for out does not exist.")
+        if os.path.exists(self.path) and not self.path.endswith(".npz"):
+            raise JaxkinError(f"chunked_map: out {path!r} already exists; choose a new path.")
+        self.tmp = tempfile.mkdtemp(prefix=".jaxkin-", dir=parent)
+        leaves = jax.tree_util.tree_leaves_with_path(out_info)
+        self.names = [_leaf_name(p) or "out" for p, _ in leaves]
+        self.files = []
+        for name, (_, spec) in zip(self.names, leaves, strict=True):
+            f = open(os.path.join(self.tmp, f"{name}.npy"), "wb")
+            header = {
+                "descr": np.lib.format.dtype_to_descr(np.dtype(spec.dtype)),
+                "fortran_order": False,
+                "shape": (n, *spec.shape[1:]),
+            }
+            np.lib.format.write_array_header_1_0(f, header)
+            self.files.append(f)
+        self.treedef = jax.tree_util.tree_structure(out_info)
+        self.done = False
+
+    def append(self, chunk_out: Any) -> None:
+        for f, leaf in zip(self.files, jax.tree_util.tree_leaves(chunk_out), strict=True):
+            f.write(np.ascontiguousarray(leaf).tobytes())
+
+    def commit(self) -> str:
+        for f in self.files:
+            f.close()
+        if self.path.endswith(".npz"):
+            staged = os.path.join(self.tmp, "result.npz")
+            with zipfile.ZipFile(staged, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
+                for name in self.names:
+                    z.write(os.path.join(self.tmp, f"{name}.npy"), arcname=f"{name}.npy")
+            os.replace(staged, self.path)
+        else:
+            os.replace(self.tmp, self.path)
+            self.tmp = None
+        self.done = True
+        return self.path
+
+    def abort(self) -> None:
+        for f in self.files:
+            if not f.closed:
+                f.close()
+        if self.tmp is not None and os.path.isdir(self.tmp):
+            shutil.rmtree(self.tmp, ignore_errors=True)
+        self.tmp = None
+
+
+def _leaf_name(path) -> str:
+    name = jax.tree_util.keystr(path)
+    return "".join(c if c.isalnum() or c in "_-" else "_" for c in name).strip("_")

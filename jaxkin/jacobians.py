@@ -26,9 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _fold as fold
 from . import spatial
 from .errors import JaxkinError, ShapeError
-from .kinematics import check_q, forward_pass
+from .kinematics import check_q, frame_pose, scalar_pass, scan_pass, uses_scan
 from .model import Robot
 
 __all__ = [
@@ -72,25 +73,44 @@ def _check_point(point: Any, dtype) -> jax.Array | None:
     return jnp.asarray(point, dtype=dtype)
 
 
-def _columns(robot: Robot, fp, target: jax.Array, frame: int) -> tuple[jax.Array, jax.Array]:
-    """Table 4.1: linear and angular columns at world point ``target`` for joints on the path."""
-    dtype = fp.p.dtype
-    Jv = [jnp.zeros(3, dtype=dtype) for _ in range(robot.dof)]
-    Jw = [jnp.zeros(3, dtype=dtype) for _ in range(robot.dof)]
-    mult = robot.multiplier.astype(dtype)
+def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
+    """Table 4.1 as scalars: per q entry the linear and angular column at world point ``target``.
+
+    A revolute joint i contributes ``[z_i x (target - o_i); z_i]``, a prismatic one ``[z_i; 0]``
+    (times its multiplier, summed over joints sharing a q entry); joints off the path give zeros.
+    """
+    zero = (0.0, 0.0, 0.0)
+    Jv = [zero] * robot.dof
+    Jw = [zero] * robot.dof
+    mult = _multipliers(robot)
     for j in robot.ancestors(frame):
         kind = robot.kinds[j]
         if kind == "fixed":
             continue
-        z = fp.z[j]
+        z = sp.z[j]
         qi = robot.q_index[j]
         if kind == "revolute":
-            jv, jw = jnp.cross(z, target - fp.o[j]), z
+            jv, jw = fold.cross(z, fold.vsub(target, sp.o[j])), z
         else:
-            jv, jw = z, jnp.zeros_like(z)
-        Jv[qi] = Jv[qi] + mult[j] * jv
-        Jw[qi] = Jw[qi] + mult[j] * jw
-    return jnp.stack(Jv, axis=1), jnp.stack(Jw, axis=1)
+            jv, jw = z, zero
+        m = mult[j]
+        Jv[qi] = fold.vadd(Jv[qi], fold.vscale(jv, m))
+        Jw[qi] = fold.vadd(Jw[qi], fold.vscale(jw, m))
+    return Jv, Jw
+
+
+def _multipliers(robot: Robot) -> list:
+    m = robot.multiplier
+    if isinstance(m, jax.core.Tracer):
+        return [m[j] for j in range(robot.n_joints)]
+    return [float(x) for x in np.asarray(m, dtype=np.float64)]
+
+
+def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
+    """(6, dof) array from per-column 3-vectors of scalars."""
+    rows = [[Jv[k][i] for k in range(len(Jv))] for i in range(3)]
+    rows += [[Jw[k][i] for k in range(len(Jw))] for i in range(3)]
+    return fold.stack_matrix(rows, dtype)
 
 
 def geometric_jacobian(
@@ -104,7 +124,8 @@ def geometric_jacobian(
 
     Built column by column from one forward pass (the chapter's Table 4.1): a revolute joint i
     contributes ``[z_i x (p - o_i); z_i]``, a prismatic one ``[z_i; 0]``, a joint not on the path
-    to ``frame`` a zero column.
+    to ``frame`` a zero column. Elementwise, with the model's constants folded when the robot is
+    concrete (see :func:`jaxkin.kinematics.scalar_pass`).
 
     Args:
       robot: the robot.
@@ -117,17 +138,46 @@ def geometric_jacobian(
     check_reference(reference)
     q = check_q(robot, q, fn="jk.geometric_jacobian")
     f = robot.frame_index(frame)
-    fp = forward_pass(robot, q)
-    R, p = fp.R[f], fp.p[f]
-    pt = _check_point(point, p.dtype)
-    target = p if pt is None else p + R @ pt
-    Jv, Jw = _columns(robot, fp, target, f)
-    if reference == "world_aligned":
-        return jnp.concatenate([Jv, Jw], axis=0)
+    if uses_scan(robot):
+        return _geometric_jacobian_scan(robot, q, f, point, reference)
+    sp = scalar_pass(robot, q)
+    pt = _check_point(point, sp.dtype)
+    R, p = sp.R[f], sp.p[f]
+    target = p if pt is None else fold.vadd(p, fold.matvec(R, tuple(pt[i] for i in range(3))))
+    Jv, Jw = _columns(robot, sp, target, f)
     if reference == "local":
-        return jnp.concatenate([R.T @ Jv, R.T @ Jw], axis=0)
-    # world: velocity of the point at the world origin: v_target - omega x target
-    return jnp.concatenate([Jv + spatial.skew(target) @ Jw, Jw], axis=0)
+        Rt = fold.transpose(R)
+        Jv = [fold.matvec(Rt, c) for c in Jv]
+        Jw = [fold.matvec(Rt, c) for c in Jw]
+    elif reference == "world":
+        # velocity of the point at the world origin: v_target - omega x target
+        Jv = [fold.vadd(v, fold.cross(target, w)) for v, w in zip(Jv, Jw, strict=True)]
+    return _assemble(Jv, Jw, sp.dtype)
+
+
+def _geometric_jacobian_scan(robot: Robot, q, f: int, point, reference: str) -> jax.Array:
+    """Table 4.1 vectorised over the joints of a long chain (see ``kinematics.scan_pass``)."""
+    fp = scan_pass(robot, q)
+    dtype = fp.p.dtype
+    R, p = fp.R[f], fp.p[f]
+    pt = _check_point(point, dtype)
+    target = p if pt is None else p + R @ pt
+    kinds = np.array(robot.kinds)
+    on_path = np.zeros(robot.n_joints, dtype=bool)
+    on_path[list(robot.ancestors(f))] = True
+    rev = jnp.asarray((kinds == "revolute") & on_path, dtype=dtype)[:, None]
+    pri = jnp.asarray((kinds == "prismatic") & on_path, dtype=dtype)[:, None]
+    mult = robot.multiplier.astype(dtype)[:, None]
+    cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (n, 3)
+    cols_w = mult * rev * fp.z
+    qidx = np.maximum(np.array(robot.q_index), 0)
+    Jv = jnp.zeros((robot.dof, 3), dtype=dtype).at[qidx].add(cols_v).T
+    Jw = jnp.zeros((robot.dof, 3), dtype=dtype).at[qidx].add(cols_w).T
+    if reference == "local":
+        Jv, Jw = R.T @ Jv, R.T @ Jw
+    elif reference == "world":
+        Jv = Jv + spatial.skew(target) @ Jw
+    return jnp.concatenate([Jv, Jw], axis=0)
 
 
 def change_reference(
@@ -163,8 +213,7 @@ def _pose_twist_fn(robot: Robot, frame: int, point: jax.Array | None, reference:
     """Returns ``f(q) -> (p_point, R_frame)`` used by the autodiff Jacobians."""
 
     def f(q):
-        fp = forward_pass(robot, q)
-        R, p = fp.R[frame], fp.p[frame]
+        R, p = frame_pose(robot, q, frame)
         if point is not None:
             p = p + R @ point.astype(p.dtype)
         return p, R

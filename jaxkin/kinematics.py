@@ -13,11 +13,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _fold as fold
 from . import spatial
 from .errors import ShapeError
 from .model import Robot
 
-__all__ = ["ForwardPass", "check_q", "fk", "fk_all", "forward_pass", "joint_placements"]
+__all__ = [
+    "ForwardPass",
+    "ScalarPass",
+    "check_q",
+    "fk",
+    "fk_all",
+    "forward_pass",
+    "frame_pose",
+    "joint_placements",
+    "scalar_pass",
+    "scan_pass",
+    "uses_scan",
+]
 
 
 def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function") -> jax.Array:
@@ -72,56 +85,203 @@ class JointPlacements(NamedTuple):
     (n, 3), or None when the parameterisation makes them the identity.
     """
 
-    B: tuple[jax.Array, jax.Array] | None
-    A: tuple[jax.Array, jax.Array] | None
+    B: tuple[Any, Any] | None
+    A: tuple[Any, Any] | None
 
 
-def _dh_standard(params, dtype):
-    a, alpha, d, theta = (params[k].astype(dtype) for k in ("a", "alpha", "d", "theta"))
-    ct, st, ca, sa = jnp.cos(theta), jnp.sin(theta), jnp.cos(alpha), jnp.sin(alpha)
-    z = jnp.zeros_like(a)
+def _dh_standard(params, xp):
+    a, alpha, d, theta = (params[k] for k in ("a", "alpha", "d", "theta"))
+    ct, st, ca, sa = xp.cos(theta), xp.sin(theta), xp.cos(alpha), xp.sin(alpha)
+    z = xp.zeros_like(a)
     # Rz(theta) Tz(d) Tx(a) Rx(alpha)
-    R = jnp.stack(
+    R = xp.stack(
         [
-            jnp.stack([ct, -st * ca, st * sa], -1),
-            jnp.stack([st, ct * ca, -ct * sa], -1),
-            jnp.stack([z, sa, ca], -1),
+            xp.stack([ct, -st * ca, st * sa], -1),
+            xp.stack([st, ct * ca, -ct * sa], -1),
+            xp.stack([z, sa, ca], -1),
         ],
         -2,
     )
-    p = jnp.stack([a * ct, a * st, d], -1)
+    p = xp.stack([a * ct, a * st, d], -1)
     return R, p
 
 
-def _dh_modified(params, dtype):
-    a, alpha, d, theta = (params[k].astype(dtype) for k in ("a", "alpha", "d", "theta"))
-    ct, st, ca, sa = jnp.cos(theta), jnp.sin(theta), jnp.cos(alpha), jnp.sin(alpha)
-    z = jnp.zeros_like(a)
+def _dh_modified(params, xp):
+    a, alpha, d, theta = (params[k] for k in ("a", "alpha", "d", "theta"))
+    ct, st, ca, sa = xp.cos(theta), xp.sin(theta), xp.cos(alpha), xp.sin(alpha)
+    z = xp.zeros_like(a)
     # Rx(alpha) Tx(a) Rz(theta) Tz(d)
-    R = jnp.stack(
+    R = xp.stack(
         [
-            jnp.stack([ct, -st, z], -1),
-            jnp.stack([ca * st, ca * ct, -sa], -1),
-            jnp.stack([sa * st, sa * ct, ca], -1),
+            xp.stack([ct, -st, z], -1),
+            xp.stack([ca * st, ca * ct, -sa], -1),
+            xp.stack([sa * st, sa * ct, ca], -1),
         ],
         -2,
     )
-    p = jnp.stack([a, -sa * d, ca * d], -1)
+    p = xp.stack([a, -sa * d, ca * d], -1)
     return R, p
 
 
-def joint_placements(robot: Robot, dtype=None) -> JointPlacements:
-    """The constant placements ``B_j`` and ``A_j`` of every joint (see :mod:`jaxkin.model`)."""
-    dtype = dtype or robot.dtype
+def _rpy(rpy, xp):
+    r, p, y = rpy[..., 0], rpy[..., 1], rpy[..., 2]
+    cr, sr, cp, sp, cy, sy = xp.cos(r), xp.sin(r), xp.cos(p), xp.sin(p), xp.cos(y), xp.sin(y)
+    # Rz(yaw) Ry(pitch) Rx(roll)
+    return xp.stack(
+        [
+            xp.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+            xp.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+            xp.stack([-sp, cp * sr, cp * cr], -1),
+        ],
+        -2,
+    )
+
+
+def joint_placements(robot: Robot, dtype=None, xp=jnp) -> JointPlacements:
+    """The constant placements ``B_j`` and ``A_j`` of every joint (see :mod:`jaxkin.model`).
+
+    ``xp`` is ``jax.numpy`` (traced leaves) or ``numpy`` (concrete leaves, in float64).
+    """
+    if xp is jnp:
+        dtype = dtype or robot.dtype
+        params = {k: v.astype(dtype) for k, v in robot.params.items()}
+    else:
+        params = {k: np.asarray(v, dtype=np.float64) for k, v in robot.params.items()}
     kind = robot.parameterisation
     if kind == "dh_standard":
-        return JointPlacements(B=None, A=_dh_standard(robot.params, dtype))
+        return JointPlacements(B=None, A=_dh_standard(params, xp))
     if kind == "dh_modified":
-        return JointPlacements(B=_dh_modified(robot.params, dtype), A=None)
-    xyz = robot.params["xyz"].astype(dtype)
-    rpy = robot.params["rpy"].astype(dtype)
-    R = jax.vmap(spatial.rpy_to_matrix)(rpy)
-    return JointPlacements(B=(R, xyz), A=None)
+        return JointPlacements(B=_dh_modified(params, xp), A=None)
+    return JointPlacements(B=(_rpy(params["rpy"], xp), params["xyz"]), A=None)
+
+
+def _is_concrete(tree) -> bool:
+    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
+class _Constants(NamedTuple):
+    """Per-joint constants as scalars: Python floats (folded) or JAX scalars (traced)."""
+
+    B: list | None  # per joint (Mat, Vec)
+    A: list | None
+    axis: list  # per joint Vec
+    offset: list
+    mult: list
+    base: tuple  # (Mat, Vec)
+    tool: tuple | None
+
+
+SNAP = 1e-15
+
+
+def _snap(x) -> float:
+    """A concrete constant as a Python float; within 1e-15 of 0 or +-1 it is taken as exact
+    (cos(pi/2) evaluates to 6e-17 in float64), so +-90 degree placements fold away."""
+    x = float(x)
+    for exact in (0.0, 1.0, -1.0):
+        if abs(x - exact) <= SNAP:
+            return exact
+    return x
+
+
+def _scalars(x, to_scalar):
+    if getattr(x, "ndim", 0) == 0:
+        return to_scalar(x)
+    return tuple(_scalars(x[i], to_scalar) for i in range(x.shape[0]))
+
+
+def _constants(robot: Robot, dtype) -> _Constants:
+    """Everything the forward pass needs from the model, as scalars.
+
+    With concrete leaves (a robot closed over by ``jit``, or eager use) the constants are Python
+    floats computed in float64 and folded into the kernel; with traced leaves (``jit`` over the
+    robot, ``grad`` with respect to its parameters, ``vmap`` over a stack of robots) they are JAX
+    scalars and new values never retrace.
+    """
+    if _is_concrete(robot):
+        xp, conv = np, lambda a: np.asarray(a, dtype=np.float64)
+        to_scalar = _snap
+    else:
+        xp, conv = jnp, lambda a: jnp.asarray(a).astype(dtype)
+        to_scalar = lambda a: a  # noqa: E731
+    place = joint_placements(robot, dtype, xp=xp)
+    n = robot.n_joints
+
+    def pairs(pl):
+        if pl is None:
+            return None
+        R, p = _scalars(pl[0], to_scalar), _scalars(pl[1], to_scalar)
+        return [(R[j], p[j]) for j in range(n)]
+
+    axis = _scalars(conv(robot.axis), to_scalar)
+    if robot.parameterisation != "placement":
+        axis = [(0.0, 0.0, 1.0)] * n  # DH joints move about z by construction
+    base = conv(robot.base)
+    tool = conv(robot.tool)
+    return _Constants(
+        B=pairs(place.B),
+        A=pairs(place.A),
+        axis=list(axis),
+        offset=list(_scalars(conv(robot.offset), to_scalar)),
+        mult=list(_scalars(conv(robot.multiplier), to_scalar)),
+        base=(_scalars(base[:3, :3], to_scalar), _scalars(base[:3, 3], to_scalar)),
+        tool=(_scalars(tool[:3, :3], to_scalar), _scalars(tool[:3, 3], to_scalar))
+        if robot.has_tool
+        else None,
+    )
+
+
+class ScalarPass(NamedTuple):
+    """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`."""
+
+    R: list  # per frame: Mat
+    p: list  # per frame: Vec
+    z: list  # per joint: Vec
+    o: list  # per joint: Vec
+    dtype: Any
+
+
+def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
+    """One pass from the base to every frame, elementwise and with constants folded.
+
+    Each joint's sin and cos are computed once; placements are composed entry by entry, so XLA
+    fuses the kernel into a single loop over a batch. ``q`` must be validated (``check_q``).
+    """
+    dtype = _result_dtype(robot, q)
+    q = q.astype(dtype)
+    K = _constants(robot, dtype)
+    qv = [q[i] for i in range(robot.dof)]
+    Rs, ps = [K.base[0]], [K.base[1]]
+    zs, os = [], []
+    for j, (kind, parent, qi) in enumerate(
+        zip(robot.kinds, robot.parents, robot.q_index, strict=True)
+    ):
+        R, p = Rs[parent], ps[parent]
+        if K.B is not None:
+            Rb, pb = K.B[j]
+            p = fold.vadd(p, fold.matvec(R, pb))
+            R = fold.matmul(R, Rb)
+        z = fold.matvec(R, K.axis[j])
+        zs.append(z)
+        os.append(p)
+        if kind != "fixed":
+            value = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
+            if kind == "revolute":
+                M = fold.rotation_about(K.axis[j], jnp.cos(value), jnp.sin(value))
+                R = fold.matmul(R, M)
+            else:
+                p = fold.vadd(p, fold.vscale(z, value))
+        if K.A is not None:
+            Ra, pa = K.A[j]
+            p = fold.vadd(p, fold.matvec(R, pa))
+            R = fold.matmul(R, Ra)
+        Rs.append(R)
+        ps.append(p)
+    if K.tool is not None:
+        R, p = Rs[-1], ps[-1]
+        ps.append(fold.vadd(p, fold.matvec(R, K.tool[1])))
+        Rs.append(fold.matmul(R, K.tool[0]))
+    return ScalarPass(R=Rs, p=ps, z=zs, o=os, dtype=dtype)
 
 
 class ForwardPass(NamedTuple):
@@ -138,77 +298,104 @@ class ForwardPass(NamedTuple):
     o: jax.Array
 
 
-def forward_pass(robot: Robot, q: jax.Array) -> ForwardPass:
-    """One pass from the base to every frame; q must already be validated (``check_q``)."""
+SCAN_MIN_JOINTS = 32
+
+
+def uses_scan(robot: Robot) -> bool:
+    """Long serial chains run through ``lax.scan`` (compile time independent of length)."""
+    return robot.n_joints >= SCAN_MIN_JOINTS and robot.parents == tuple(range(robot.n_joints))
+
+
+def scan_pass(robot: Robot, q: jax.Array) -> ForwardPass:
+    """The forward pass of a serial chain as one ``lax.scan`` step per joint.
+
+    Every joint is the same step: ``B``, then a rotation by ``is_revolute * value`` about the
+    axis and a translation by ``is_prismatic * value`` along it, then ``A`` (fixed joints have
+    both flags 0). Compile time does not grow with the number of joints.
+    """
     dtype = _result_dtype(robot, q)
     q = q.astype(dtype)
+    n = robot.n_joints
     place = joint_placements(robot, dtype)
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=dtype), (n, 3, 3))
+    zero3 = jnp.zeros((n, 3), dtype=dtype)
+    B_R, B_p = place.B if place.B is not None else (eye, zero3)
+    A_R, A_p = place.A if place.A is not None else (eye, zero3)
     axis = robot.axis.astype(dtype)
-    offset = robot.offset.astype(dtype)
-    mult = robot.multiplier.astype(dtype)
+    if robot.parameterisation != "placement":
+        axis = jnp.broadcast_to(jnp.array([0.0, 0.0, 1.0], dtype=dtype), (n, 3))
+    kinds = np.array(robot.kinds)
+    is_rev = jnp.asarray(kinds == "revolute", dtype=dtype)
+    is_pri = jnp.asarray(kinds == "prismatic", dtype=dtype)
+    qidx = np.maximum(np.array(robot.q_index), 0)
+    value = robot.multiplier.astype(dtype) * q[qidx] + robot.offset.astype(dtype)
     base = robot.base.astype(dtype)
-    dh = robot.parameterisation != "placement"
 
-    Rs = [base[:3, :3]]
-    ps = [base[:3, 3]]
-    zs, os = [], []
-    for j, (kind, parent, qi) in enumerate(
-        zip(robot.kinds, robot.parents, robot.q_index, strict=True)
-    ):
-        R, p = Rs[parent], ps[parent]
-        if place.B is not None:
-            p = p + R @ place.B[1][j]
-            R = R @ place.B[0][j]
-        if dh:
-            zj = R[:, 2]
-        else:
-            zj = R @ axis[j]
-        zs.append(zj)
-        os.append(p)
-        if kind != "fixed":
-            value = mult[j] * q[qi] + offset[j]
-            if kind == "revolute":
-                c, s = jnp.cos(value), jnp.sin(value)
-                if dh:
-                    R = jnp.stack(
-                        [R[:, 0] * c + R[:, 1] * s, R[:, 1] * c - R[:, 0] * s, R[:, 2]], 1
-                    )
-                else:
-                    K = spatial.skew(axis[j])
-                    M = jnp.eye(3, dtype=dtype) + s * K + (1.0 - c) * (K @ K)
-                    R = R @ M
-            else:
-                p = p + zj * value
-        if place.A is not None:
-            p = p + R @ place.A[1][j]
-            R = R @ place.A[0][j]
-        Rs.append(R)
-        ps.append(p)
+    def step(carry, x):
+        R, p = carry
+        BR, Bp, ax, val, rev, pri, AR, Ap = x
+        p = p + R @ Bp
+        R = R @ BR
+        z = R @ ax
+        o = p
+        angle = rev * val
+        R = R @ spatial.rotation_about_axis(ax, angle)
+        p = p + z * (pri * val)
+        p = p + R @ Ap
+        R = R @ AR
+        return (R, p), (R, p, z, o)
+
+    xs = (B_R, B_p, axis, value, is_rev, is_pri, A_R, A_p)
+    _, (Rs, ps, zs, os) = jax.lax.scan(step, (base[:3, :3], base[:3, 3]), xs)
+    Rs = jnp.concatenate([base[None, :3, :3], Rs])
+    ps = jnp.concatenate([base[None, :3, 3], ps])
     if robot.has_tool:
         tool = robot.tool.astype(dtype)
-        R, p = Rs[-1], ps[-1]
-        ps.append(p + R @ tool[:3, 3])
-        Rs.append(R @ tool[:3, :3])
-    return ForwardPass(R=jnp.stack(Rs), p=jnp.stack(ps), z=jnp.stack(zs), o=jnp.stack(os))
+        Rs = jnp.concatenate([Rs, (Rs[-1] @ tool[:3, :3])[None]])
+        ps = jnp.concatenate([ps, (ps[-1] + Rs[-2] @ tool[:3, 3])[None]])
+    return ForwardPass(R=Rs, p=ps, z=zs, o=os)
 
 
-def _to_T(R: jax.Array, p: jax.Array) -> jax.Array:
-    top = jnp.concatenate([R, p[..., :, None]], axis=-1)
-    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], dtype=R.dtype), (*R.shape[:-2], 1, 4))
-    return jnp.concatenate([top, bottom], axis=-2)
+def forward_pass(robot: Robot, q: jax.Array) -> ForwardPass:
+    """One pass from the base to every frame, as stacked arrays; q must be validated."""
+    if uses_scan(robot):
+        return scan_pass(robot, q)
+    sp = scalar_pass(robot, q)
+    st = lambda x: fold.stack_matrix(x, sp.dtype)  # noqa: E731
+    return ForwardPass(R=st(sp.R), p=st(sp.p), z=st(sp.z), o=st(sp.o))
+
+
+def frame_pose(robot: Robot, q: jax.Array, frame: int) -> tuple[jax.Array, jax.Array]:
+    """``(R, p)`` of one frame (by index) in world coordinates; q must be validated."""
+    if uses_scan(robot):
+        fp = scan_pass(robot, q)
+        return fp.R[frame], fp.p[frame]
+    sp = scalar_pass(robot, q)
+    return fold.stack_matrix(sp.R[frame], sp.dtype), fold.stack_matrix(sp.p[frame], sp.dtype)
 
 
 def fk_all(robot: Robot, q: Any) -> jax.Array:
     """Poses ``T_world_frame`` of every frame, shape (n_frames, 4, 4), in ``robot.frame_names``
     order (base first, tool last when present)."""
     q = check_q(robot, q, fn="jk.fk_all")
-    fp = forward_pass(robot, q)
-    return _to_T(fp.R, fp.p)
+    if uses_scan(robot):
+        fp = scan_pass(robot, q)
+        return jax.vmap(spatial.make_transform)(fp.R, fp.p)
+    sp = scalar_pass(robot, q)
+    return jnp.stack([_pose(R, p, sp.dtype) for R, p in zip(sp.R, sp.p, strict=True)])
 
 
 def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
     """Pose ``T_world_frame`` of one frame (default: the tip, tool included), shape (4, 4)."""
     q = check_q(robot, q, fn="jk.fk")
     f = robot.frame_index(frame)
-    fp = forward_pass(robot, q)
-    return _to_T(fp.R[f], fp.p[f])
+    if uses_scan(robot):
+        R, p = frame_pose(robot, q, f)
+        return spatial.make_transform(R, p)
+    sp = scalar_pass(robot, q)
+    return _pose(sp.R[f], sp.p[f], sp.dtype)
+
+
+def _pose(R, p, dtype) -> jax.Array:
+    rows = [(*R[i], p[i]) for i in range(3)] + [(0.0, 0.0, 0.0, 1.0)]
+    return fold.stack_matrix(rows, dtype)
