@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import JaxkinError, ShapeError
-from .jacobians import geometric_jacobian
+from .jacobians import _geometric, check_reference
 from .kinematics import check_q
 from .model import Robot
 
@@ -38,11 +38,14 @@ def twist(
 ) -> jax.Array:
     """Twist ``[v; omega] = J(q) @ qd`` of ``frame`` (default: the tip); shape (6,).
 
-    ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``.
+    ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``. Computed column by
+    column from the same forward pass as :func:`~jaxkin.geometric_jacobian`, without forming J.
     """
     qd = check_q(robot, qd, what="qd", fn="jk.twist")
-    J = geometric_jacobian(robot, q, frame=frame, point=point, reference=reference)
-    return J @ qd.astype(J.dtype)
+    check_reference(reference)
+    q = check_q(robot, q, fn="jk.twist")
+    g = _geometric(robot, q, robot.frame_index(frame), point, reference)
+    return g.times(qd.astype(g.dtype))
 
 
 def point_velocity(

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
@@ -204,14 +205,6 @@ def modified_dh_urdf(robot: jk.Robot) -> str:
 
 
 # ----------------------------------------------------------------------------------- helpers
-def sample_configurations(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo = np.asarray(robot.lower, dtype=np.float64).copy()
-    hi = np.asarray(robot.upper, dtype=np.float64).copy()
-    for i, kind in enumerate(robot.joint_kinds):
-        span = math.pi if kind == "revolute" else 0.5
-        lo[i] = lo[i] if np.isfinite(lo[i]) else -span
-        hi[i] = hi[i] if np.isfinite(hi[i]) else span
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
 
 
 def _kernel(robot: jk.Robot, qs: jax.Array):

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
@@ -83,16 +84,6 @@ def reach(robot: jk.Robot) -> float:
 
 def tolerance(robot: jk.Robot) -> float:
     return 1e-12 * max(1.0, reach(robot))
-
-
-def sample_configurations(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo = np.asarray(robot.lower, dtype=np.float64).copy()
-    hi = np.asarray(robot.upper, dtype=np.float64).copy()
-    for i, kind in enumerate(robot.joint_kinds):
-        span = math.pi if kind == "revolute" else 0.5
-        lo[i] = lo[i] if np.isfinite(lo[i]) else -span
-        hi[i] = hi[i] if np.isfinite(hi[i]) else span
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
 
 
 def rtb_model(name: str):

@@ -113,3 +113,26 @@ def test_representation_round_trips():
         reps.from_matrix(jnp.eye(4), "rpy")
     with pytest.raises(jk.ShapeError, match=r"\(6, dof\)"):
         jk.analytical_from_geometric(jnp.zeros((3, 2)), jnp.zeros(3))
+
+
+@pytest.mark.parametrize("rep", reps.REPRESENTATIONS)
+@given(robot_q=jkt.robots_and_configurations(1, 7))
+def test_analytical_chain_method_equals_full_jacfwd(rep, robot_q):
+    """The default method (hand-built dR/dq chained with jacfwd of the representation map) and
+    jax.jacfwd through all of forward kinematics agree."""
+    robot, q = robot_q
+    Ja, margin = jk.analytical_jacobian(robot, q, rep, point=[0.1, -0.2, 0.3], return_margin=True)
+    Jf, _ = jk.analytical_jacobian(
+        robot, q, rep, point=[0.1, -0.2, 0.3], method="jacfwd", return_margin=True
+    )
+    margin = float(margin)
+    phi = np.asarray(reps.from_matrix(jk.fk(robot, q)[:3, :3], rep))
+    if margin < 1e-3 or (rep == "rotvec" and np.linalg.norm(phi) > math.pi - 1e-3):
+        return
+    Ts = np.asarray(jk.fk_all(robot, q))
+    reach = max(1.0, float(np.max(np.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
+    np.testing.assert_allclose(
+        np.asarray(Ja), np.asarray(Jf), rtol=0, atol=1e-12 * reach / margin**2
+    )
+    with pytest.raises(jk.JaxkinError, match="method must be"):
+        jk.analytical_jacobian(robot, q, rep, method="numeric")

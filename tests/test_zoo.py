@@ -22,13 +22,13 @@ tests that need them, to keep the file fast.
 from __future__ import annotations
 
 import functools
-import math
 import zlib
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
@@ -47,19 +47,6 @@ OUTSIDE_TRAVEL = {("panda", "zero"), ("panda", "qz"), ("stanford", "zero")}
 # ----------------------------------------------------------------------------------- helpers
 def _seed(name: str) -> int:
     return zlib.crc32(name.encode())  # stable across processes (unlike hash())
-
-
-def sample_configurations(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    """``n`` configurations uniform within the joint limits; an unlimited revolute joint is drawn
-    in [-pi, pi], an unlimited prismatic one in [-0.5, 0.5] m."""
-    lo = np.asarray(robot.lower, dtype=np.float64).copy()
-    hi = np.asarray(robot.upper, dtype=np.float64).copy()
-    for i, kind in enumerate(robot.joint_kinds):
-        span = math.pi if kind == "revolute" else 0.5
-        lo[i] = lo[i] if np.isfinite(lo[i]) else -span
-        hi[i] = hi[i] if np.isfinite(hi[i]) else span
-    rng = np.random.default_rng(seed)
-    return lo + (hi - lo) * rng.random((n, robot.dof))
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
