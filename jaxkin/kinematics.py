@@ -231,6 +231,24 @@ def _constants(robot: Robot, dtype) -> _Constants:
     )
 
 
+def _joint_trig(robot: Robot, K: _Constants, qv: list) -> dict:
+    """cos and sin of every revolute joint's value, computed once and materialised together.
+
+    The optimisation barrier stops XLA from re-deriving them inside each fusion of the kernel
+    (it otherwise duplicates the transcendental ops into every consumer).
+    """
+    values = {}
+    for j, (kind, qi) in enumerate(zip(robot.kinds, robot.q_index, strict=True)):
+        if kind == "revolute":
+            values[j] = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
+    if not values:
+        return {}
+    keys = list(values)
+    v = jnp.stack([jnp.asarray(values[j]) for j in keys])
+    c, s = jax.lax.optimization_barrier((jnp.cos(v), jnp.sin(v)))
+    return {j: (c[i], s[i]) for i, j in enumerate(keys)}
+
+
 class ScalarPass(NamedTuple):
     """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`."""
 
@@ -251,6 +269,7 @@ def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
     q = q.astype(dtype)
     K = _constants(robot, dtype)
     qv = [q[i] for i in range(robot.dof)]
+    trig = _joint_trig(robot, K, qv)
     Rs, ps = [K.base[0]], [K.base[1]]
     zs, os = [], []
     for j, (kind, parent, qi) in enumerate(
@@ -267,7 +286,7 @@ def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
         if kind != "fixed":
             value = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
             if kind == "revolute":
-                M = fold.rotation_about(K.axis[j], jnp.cos(value), jnp.sin(value))
+                M = fold.rotation_about(K.axis[j], *trig[j])
                 R = fold.matmul(R, M)
             else:
                 p = fold.vadd(p, fold.vscale(z, value))
