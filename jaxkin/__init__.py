@@ -27,6 +27,7 @@ from .model import Robot as Robot
 from .representations import analytical_from_geometric as analytical_from_geometric
 from .representations import rate_matrix as rate_matrix
 from .representations import representation_margin as representation_margin
+from .urdf import load_urdf as load_urdf
 from .velocity import classify_motion as classify_motion
 from .velocity import classify_twist as classify_twist
 from .velocity import point_velocity as point_velocity

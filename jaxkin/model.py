@@ -346,19 +346,42 @@ class Robot:
             joint moves), optional ``parent`` (a frame name; default: the previous joint's child),
             ``xyz`` and ``rpy`` (the joint origin in the parent frame, URDF fixed-axis roll-pitch-
             yaw ``R = Rz(y) Ry(p) Rx(r)``; default zeros), ``axis`` (in the joint frame, normalised;
-            default (1, 0, 0) as in URDF), ``lower``, ``upper``.
+            default (1, 0, 0) as in URDF), ``lower``, ``upper``, ``mimic``.
           root: the name of the base frame.
           base, tool, name, dtype: as in :meth:`from_dh`.
 
-        ``T_parent_child(q) = Trans(xyz) Rot(rpy) Motion(axis, q)``, as in URDF.
+        ``T_parent_child(q) = Trans(xyz) Rot(rpy) Motion(axis, value)``, as in URDF, where
+        ``value = q[i]`` for an independent joint.
+
+        Mimic joints (URDF ``<mimic>``): ``mimic={"joint": leader, "multiplier": m, "offset": o}``
+        (multiplier default 1, offset default 0) makes a revolute or prismatic joint follow the
+        moving joint named ``leader`` (listed anywhere in ``joints``):
+        ``value = m * value_leader + o``. A mimic joint is not an entry of ``q`` (it is not in
+        ``joint_names`` and its ``lower``/``upper`` are checked but not kept: the leader's limits
+        bound ``q``); its Jacobian column folds into the leader's, scaled by ``m``. A leader may
+        itself mimic another joint: the chain is resolved to the independent joint at its end
+        (multipliers multiply, offsets compose); a chain that loops back is an error.
         """
         if isinstance(joints, Mapping) or not isinstance(joints, Sequence) or len(joints) == 0:
             raise ModelError("joints must be a non-empty sequence of mappings, one per joint.")
         dt = resolve_dtype(dtype)
         frame_names = [str(root)]
+        frame_of = {str(root): 0}  # name -> frame index (O(1) lookups for long chains)
         xyz, rpy, axes, kinds, parents, q_index = [], [], [], [], [], []
         lowers, uppers, joint_names, all_names = [], [], [], []
-        allowed = {"name", "type", "child", "parent", "xyz", "rpy", "axis", "lower", "upper"}
+        mimics: dict[int, tuple[str, float, float]] = {}  # joint index -> (leader, mult, offset)
+        allowed = {
+            "name",
+            "type",
+            "child",
+            "parent",
+            "xyz",
+            "rpy",
+            "axis",
+            "lower",
+            "upper",
+            "mimic",
+        }
         for j, spec in enumerate(joints):
             where = f"joint {j}"
             if not isinstance(spec, Mapping):
@@ -379,40 +402,61 @@ class Robot:
                     f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic' or 'fixed'."
                 )
             parent_name = spec.get("parent", frame_names[-1])
-            if parent_name not in frame_names:
+            if not isinstance(parent_name, str) or parent_name not in frame_of:
+                shown = frame_names if len(frame_names) <= 20 else [*frame_names[:20], "..."]
                 raise ModelError(
                     f"{where}: parent frame {parent_name!r} is not defined by an earlier joint "
-                    f"(known frames: {frame_names}). List parents before children."
+                    f"(known frames: {shown}). List parents before children."
                 )
             child = str(spec["child"])
-            if child in frame_names:
+            if child in frame_of:
                 raise ModelError(f"{where}: frame {child!r} already has a parent.")
             xyz.append(_vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'"))
             rpy.append(_vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'"))
             ax = _vector3(spec.get("axis", (1.0, 0.0, 0.0)), f"{where}, key 'axis'")
-            norm = float(np.linalg.norm(ax))
+            # Overflow- and underflow-safe norm (math.hypot scales internally).
+            norm = math.hypot(*(float(x) for x in ax))
             if kind != "fixed" and norm == 0.0:
                 raise ModelError(f"{where} has a zero axis; give a non-zero direction.")
-            axes.append(ax / norm if norm > 0 else np.array([1.0, 0.0, 0.0]))
+            if norm == 0.0:
+                ax = np.array([1.0, 0.0, 0.0])
+            elif abs(norm - 1.0) > 4 * np.finfo(np.float64).eps:
+                ax = ax / norm  # a unit axis (to rounding) is kept bit for bit: idempotent
+            axes.append(ax)
             kinds.append(kind)
-            parents.append(frame_names.index(parent_name))
+            parents.append(frame_of[parent_name])
+            frame_of[child] = len(frame_names)
             frame_names.append(child)
             all_names.append(jname)
-            if kind == "fixed":
-                q_index.append(-1)
-            else:
-                q_index.append(len(joint_names))
-                joint_names.append(jname)
+            mimic = spec.get("mimic")
+            if mimic is not None:
+                if kind == "fixed":
+                    raise ModelError(
+                        f"{where} is fixed but has a mimic; only revolute and prismatic joints "
+                        "can mimic another joint."
+                    )
+                mimics[j] = _mimic_spec(mimic, where)
+            if kind != "fixed":
                 lo = _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'")
                 hi = _limit(spec.get("upper", math.inf), f"{where}, key 'upper'")
                 if lo > hi:
                     raise ModelError(f"{where}: lower limit {lo} is above upper limit {hi}.")
+            if kind == "fixed":
+                q_index.append(-1)
+            elif j in mimics:
+                q_index.append(-2)  # resolved below, once every joint is known
+            else:
+                q_index.append(len(joint_names))
+                joint_names.append(jname)
                 lowers.append(lo)
                 uppers.append(hi)
         _check_unique(all_names, "joint name")
+        n = len(kinds)
+        multiplier, offset = [1.0] * n, [0.0] * n
+        if mimics:
+            _resolve_mimics(mimics, all_names, kinds, q_index, multiplier, offset)
         if not joint_names:
             raise ModelError("the robot has no moving joint (all joints are fixed).")
-        n = len(kinds)
         params = {
             "xyz": jnp.asarray(np.array(xyz), dtype=dt),
             "rpy": jnp.asarray(np.array(rpy), dtype=dt),
@@ -425,8 +469,8 @@ class Robot:
             kinds=kinds,
             parents=parents,
             q_index=q_index,
-            offset=[0.0] * n,
-            multiplier=[1.0] * n,
+            offset=offset,
+            multiplier=multiplier,
             lower=lowers,
             upper=uppers,
             joint_names=joint_names,
@@ -479,6 +523,80 @@ def _finite_float(value: Any, where: str) -> float:
     if not math.isfinite(x):
         raise ModelError(f"{where} must be finite, got {value!r}.")
     return x
+
+
+def _mimic_spec(value: Any, where: str) -> tuple[str, float, float]:
+    """Validate a ``mimic`` mapping of :meth:`Robot.from_joints`: (leader, multiplier, offset)."""
+    if not isinstance(value, Mapping):
+        raise ModelError(
+            f"{where}, key 'mimic' must be a mapping {{'joint': name, 'multiplier': m, "
+            f"'offset': o}}, got {value!r}."
+        )
+    unknown = set(value) - {"joint", "multiplier", "offset"}
+    if unknown:
+        raise ModelError(
+            f"{where}, key 'mimic' has unknown key(s) {sorted(unknown)}; allowed: "
+            "['joint', 'multiplier', 'offset']."
+        )
+    leader = value.get("joint")
+    if not isinstance(leader, str) or not leader:
+        raise ModelError(
+            f"{where}, key 'mimic' needs 'joint': the name of the joint it follows, got {leader!r}."
+        )
+    mult = _finite_float(value.get("multiplier", 1.0), f"{where}, mimic 'multiplier'")
+    off = _finite_float(value.get("offset", 0.0), f"{where}, mimic 'offset'")
+    return leader, mult, off
+
+
+def _resolve_mimics(
+    mimics: dict[int, tuple[str, float, float]],
+    names: list[str],
+    kinds: list[str],
+    q_index: list[int],
+    multiplier: list[float],
+    offset: list[float],
+) -> None:
+    """Point every mimic joint at the independent joint at the end of its mimic chain, in place.
+
+    ``value_j = m_j * value_leader + o_j``; following a chain ``j -> k -> ... -> i`` (i
+    independent) composes to ``value_j = M * q[i] + O``. Iterative and linear (memoised).
+    """
+    index = {name: j for j, name in enumerate(names)}
+    done: set[int] = set()
+    for j in mimics:
+        path: list[int] = []
+        on_path: dict[int, int] = {}
+        k = j
+        while k in mimics and k not in done:
+            on_path[k] = len(path)
+            path.append(k)
+            leader = mimics[k][0]
+            where = f"joint {names[k]!r}"
+            if leader not in index:
+                raise ModelError(
+                    f"{where} mimics joint {leader!r}, which is not a joint of this robot; "
+                    "name an existing revolute or prismatic joint."
+                )
+            nxt = index[leader]
+            if kinds[nxt] == "fixed":
+                raise ModelError(
+                    f"{where} mimics joint {leader!r}, which is fixed; a mimic joint must follow "
+                    "a revolute or prismatic joint."
+                )
+            if nxt in on_path:
+                cycle = " -> ".join(names[i] for i in [*path[on_path[nxt] :], nxt])
+                raise ModelError(
+                    f"mimic joints form a cycle ({cycle}): no joint in it is independent. "
+                    "Make one of them an independent joint (remove its mimic)."
+                )
+            k = nxt
+        # k is independent or already resolved: value_k = M * q[q_index[k]] + O.
+        M, O = (multiplier[k], offset[k]) if k in done else (1.0, 0.0)
+        for i in reversed(path):
+            _, m, o = mimics[i]
+            M, O = m * M, m * O + o  # value_i = m * value_next + o
+            q_index[i], multiplier[i], offset[i] = q_index[k], M, O
+            done.add(i)
 
 
 def _limit(value: Any, where: str) -> float:

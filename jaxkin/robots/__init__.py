@@ -7,6 +7,10 @@ symbols in the textbook (the chapter's examples) take them as keyword arguments,
 
 Every entry states units (metres, radians), the source of its numbers and its named
 configurations (``robot.configurations``).
+
+When ``example-robot-data`` is installed, its URDFs load by ``"erd/..."`` names as well
+(``load("erd/panda", tip=..., base=...)``); ``erd_names()`` lists them (they are not in
+``names()``, which is the zoo). See :mod:`jaxkin.robots.example_robot_data`.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from typing import Any
 from ..errors import JaxkinError, UnknownRobotError
 from ..model import Robot
 
-__all__ = ["ZooEntry", "info", "load", "names", "register"]
+__all__ = ["ZooEntry", "erd_names", "info", "load", "names", "register"]
 
 
 @dataclass(frozen=True)
@@ -60,8 +64,19 @@ def names() -> list[str]:
     return sorted(_REGISTRY)
 
 
+def erd_names() -> list[str]:
+    """Names (``"erd/..."``) of the example-robot-data URDFs, sorted; [] if not installed."""
+    from . import example_robot_data
+
+    return example_robot_data.names()
+
+
 def info(name: str) -> ZooEntry:
     """The zoo entry of ``name`` (description, source, parameters)."""
+    if isinstance(name, str) and name.startswith("erd/"):
+        from . import example_robot_data
+
+        return example_robot_data.entry(name)
     try:
         return _REGISTRY[name]
     except (KeyError, TypeError):

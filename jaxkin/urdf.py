@@ -1,0 +1,1075 @@
+"""URDF files -> :class:`~jaxkin.Robot`: safe, strict, iterative.
+
+``jk.load_urdf(source, tip=None, base=None)`` reads a URDF (a path, an XML string or bytes) and
+builds a placement robot (``Robot.from_joints``) holding the whole kinematic tree, or the chain
+``base -> tip``, or the subtree below ``base``. :func:`parse_urdf` returns the validated
+description itself (:class:`URDFModel`: every link and joint with its line number, fixed and
+mimic joints included), for tools that need more than the kinematic model.
+
+What is read, and how
+---------------------
+* Joint types ``revolute`` (one DOF, limited), ``continuous`` (one DOF, unbounded: ``q`` is the
+  angle itself, not Pinocchio's (cos, sin) pair), ``prismatic`` and ``fixed``. A fixed joint's
+  placement is kept as a frame named after its child link. ``floating`` and ``planar`` joints are
+  refused with an error naming the joint (never welded silently): load the part below one with
+  ``base=<its child link>``, or change its type in the file.
+* ``<origin xyz rpy>``: ``T_parent_joint = Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (URDF's fixed-
+  axis roll-pitch-yaw); missing origin, xyz or rpy mean zero. The joint moves its child link,
+  whose frame is the joint frame: ``T_parent_child(q) = T_parent_joint Motion(axis, value)``.
+* ``<axis xyz>`` (in the joint frame; default ``1 0 0`` as the URDF spec says) is normalised in
+  float64 with an overflow- and underflow-safe norm, so non-unit axes (``0 0 2``) and CAD residue
+  (``0 1 6.12323e-17``) are taken as written, scaled to unit length. A zero or non-finite axis on
+  a moving joint is an error; a fixed joint's axis is ignored (it must still be numbers).
+* ``<limit lower upper>``: required on revolute and prismatic joints (as urdfdom requires), lower
+  and upper default to 0 there; ignored on continuous joints (unbounded). ``effort`` and
+  ``velocity`` are not read.
+* ``<mimic joint multiplier offset>`` (defaults 1 and 0): ``value = multiplier * value_leader +
+  offset``. Only independent joints are entries of ``q``; a mimic joint's Jacobian column folds
+  into its leader's. A ``<mimic>`` on a fixed joint has no effect and is ignored (as urdfdom
+  and Pinocchio do), once its leader is found to exist. Chains of mimic joints resolve to the
+  independent joint at their end; a mimic joint whose leader lies outside a ``tip``/``base``
+  selection is driven by the leader's entry of ``q`` all the same (named after the leader, with
+  the leader's limits).
+* Names: ``robot.joint_names`` are the independent joints in ``q`` order: depth-first from the
+  root, siblings in file order. (Pinocchio, through urdfdom, visits siblings sorted by joint
+  name instead, so its ``q`` order can differ on trees: match joints by name.)
+  ``robot.frame_names`` are the links in the same order (the root first), so
+  ``jk.fk(robot, q, frame="panda_hand")`` and ``geometric_jacobian(..., frame=...)`` work for
+  every link, with zero columns for joints not on that link's path.
+
+Safety
+------
+The XML is parsed by expat with handlers that refuse any document type declaration (DOCTYPE),
+entity or notation declaration before any of it is processed: no entity is ever expanded, no
+external entity, file or URL is ever resolved. Input is capped at ``max_bytes`` (default
+:data:`DEFAULT_MAX_BYTES`) before parsing. Mesh references are never opened, ``package://`` URLs
+never resolved, xacro never run (a file with ``xacro:`` elements is refused). Every tree
+algorithm is iterative and linear (no recursion limit: a 3,000-joint chain, or a 3,000-joint
+chain of mimic joints, loads in about a second).
+
+Errors
+------
+Every problem in a file raises :class:`URDFError` (a :class:`jaxkin.ModelError`) whose message
+names the file, the line, the element, the attribute and the offending value, and says how to fix
+it; the same facts are attributes of the exception.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import os
+import re
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from xml.parsers import expat
+
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import ModelError
+from .model import Robot
+
+__all__ = [
+    "DEFAULT_MAX_BYTES",
+    "MAX_MAGNITUDE",
+    "URDFError",
+    "URDFJoint",
+    "URDFLink",
+    "URDFMimic",
+    "URDFModel",
+    "load_urdf",
+    "parse_urdf",
+]
+
+DEFAULT_MAX_BYTES = 16 * 1024 * 1024
+"""Largest URDF accepted by default (16 MiB; the largest file of example-robot-data is 0.2 MB)."""
+
+MAX_MAGNITUDE = 1e6
+"""Largest magnitude accepted for a length in metres (origin ``xyz``), an origin angle in radians
+(``rpy``) or a mimic multiplier or offset. Anything larger is a typo or a unit error, and would
+overflow (or lose every digit of) the kinematics; joint limits are not capped."""
+
+MOVING_TYPES = ("revolute", "continuous", "prismatic")
+SUPPORTED_TYPES = (*MOVING_TYPES, "fixed")
+REFUSED_TYPES = ("floating", "planar")
+
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_SHOW = 80  # characters of an offending value shown in a message
+
+
+# ---------------------------------------------------------------------------------- errors
+class URDFError(ModelError):
+    """An invalid or refused URDF. A :class:`jaxkin.ModelError` (hence a ``ValueError``).
+
+    Attributes: ``file`` (path, ``"<string>"`` or ``"<bytes>"``), ``line`` (1-based, or None),
+    ``element`` (e.g. ``"<axis> of joint 'j1'"``), ``attribute``, ``value`` (the offending text,
+    or None), ``problem`` and ``fix`` (what was wrong, what to do).
+    """
+
+    def __init__(
+        self,
+        problem: str,
+        *,
+        file: str,
+        line: int | None = None,
+        element: str | None = None,
+        attribute: str | None = None,
+        value: str | None = None,
+        fix: str | None = None,
+    ) -> None:
+        self.file, self.line, self.element = file, line, element
+        self.attribute, self.value, self.problem, self.fix = attribute, value, problem, fix
+        where = file if line is None else f"{file}, line {line}"
+        parts = [where]
+        if element:
+            parts.append(element)
+        if attribute:
+            shown = "" if value is None else f"={_show(value)}"
+            parts.append(f"attribute {attribute!r}{shown}")
+        elif value is not None:
+            parts.append(f"value {_show(value)}")
+        message = ": ".join(parts) + f": {problem}"
+        if fix:
+            message += f" Fix: {fix}"
+        super().__init__(message)
+
+    def __reduce__(self):  # picklable (multiprocessing, pytest-xdist) despite keyword-only args
+        kwargs = dict(
+            file=self.file,
+            line=self.line,
+            element=self.element,
+            attribute=self.attribute,
+            value=self.value,
+            fix=self.fix,
+        )
+        return (_rebuild_error, (self.problem, kwargs))
+
+
+def _rebuild_error(problem: str, kwargs: dict[str, Any]) -> URDFError:
+    return URDFError(problem, **kwargs)
+
+
+def _show(value: str) -> str:
+    text = value if len(value) <= _SHOW else value[:_SHOW] + "..."
+    return repr(text)
+
+
+# ---------------------------------------------------------------------------------- description
+@dataclass(frozen=True)
+class URDFLink:
+    """A ``<link>``: its name and the line it is declared on."""
+
+    name: str
+    line: int | None
+
+
+@dataclass(frozen=True)
+class URDFMimic:
+    """A ``<mimic>``: ``value = multiplier * value_joint + offset``."""
+
+    joint: str
+    multiplier: float
+    offset: float
+    line: int | None
+
+
+@dataclass(frozen=True)
+class URDFJoint:
+    """A validated ``<joint>``.
+
+    ``xyz``/``rpy``: the origin in the parent link's frame; ``axis``: the unit axis in the joint
+    frame (``(1, 0, 0)`` for fixed joints); ``lower``/``upper``: limits (infinite for continuous
+    joints, NaN for fixed ones).
+    """
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    lower: float
+    upper: float
+    mimic: URDFMimic | None
+    line: int | None
+
+
+@dataclass(frozen=True)
+class URDFModel:
+    """A validated URDF: one tree of links joined by joints (file order kept)."""
+
+    name: str
+    file: str
+    links: tuple[URDFLink, ...]
+    joints: tuple[URDFJoint, ...]
+    root: str
+
+    @property
+    def joint_map(self) -> dict[str, URDFJoint]:
+        return {j.name: j for j in self.joints}
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        return tuple(link.name for link in self.links)
+
+    @property
+    def independent_joints(self) -> tuple[str, ...]:
+        """Moving joints that are not mimic joints, depth-first from the root (``q`` order)."""
+        return tuple(
+            j.name for j in self.depth_first() if j.type in MOVING_TYPES and j.mimic is None
+        )
+
+    def children(self) -> dict[str, list[URDFJoint]]:
+        """Joints leaving each link, in file order."""
+        out: dict[str, list[URDFJoint]] = {link.name: [] for link in self.links}
+        for j in self.joints:
+            out[j.parent].append(j)
+        return out
+
+    def depth_first(self, start: str | None = None) -> Iterator[URDFJoint]:
+        """Joints of the subtree below ``start`` (default: the root), depth-first pre-order,
+        children in file order. Iterative."""
+        children = self.children()
+        stack = list(reversed(children[self.root if start is None else start]))
+        while stack:
+            joint = stack.pop()
+            yield joint
+            stack.extend(reversed(children[joint.child]))
+
+
+# ---------------------------------------------------------------------------------- reading
+class _Element:
+    """A parsed XML element: tag, attributes, line, children (no text: URDF needs none)."""
+
+    __slots__ = ("attrib", "children", "line", "tag")
+
+    def __init__(self, tag: str, attrib: dict[str, str], line: int) -> None:
+        self.tag, self.attrib, self.line = tag, attrib, line
+        self.children: list[_Element] = []
+
+
+def _looks_like_xml(text: str) -> bool:
+    return text.lstrip("\ufeff \t\r\n").startswith("<")
+
+
+def _read_source(source: Any, max_bytes: int) -> tuple[bytes | str, str]:
+    """The document and a label for messages. Reads at most ``max_bytes + 1`` bytes."""
+    too_big = (
+        "raise the cap with jk.load_urdf(..., max_bytes=N) (or parse_urdf(..., max_bytes=N)) "
+        "if the file is legitimate."
+    )
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        data = bytes(source)
+        if len(data) > max_bytes:
+            raise URDFError(
+                f"the document is {len(data)} bytes, over the {max_bytes}-byte limit (max_bytes).",
+                file="<bytes>",
+                fix=too_big,
+            )
+        return data, "<bytes>"
+    if isinstance(source, str) and _looks_like_xml(source):
+        if len(source) > max_bytes or len(source.encode("utf-8", "surrogatepass")) > max_bytes:
+            raise URDFError(
+                f"the document is over the {max_bytes}-byte limit (max_bytes).",
+                file="<string>",
+                fix=too_big,
+            )
+        return source, "<string>"
+    if isinstance(source, (str, os.PathLike)):
+        try:
+            path = Path(source)
+        except TypeError:
+            path = None
+        label = str(source)
+        if len(label) > 200:  # a long non-XML string: shown shortened in messages
+            label = label[:200] + "..."
+        if path is None or not str(source):
+            raise ModelError(
+                f"source must be a URDF path, an XML string or bytes, got {source!r}."
+            ) from None
+        if path.suffix == ".xacro" or label.endswith(".xacro"):
+            raise URDFError(
+                "this is a xacro file; jaxkin never runs xacro (it executes code and reads other "
+                "files).",
+                file=label,
+                fix=f"expand it first: `xacro {label} > robot.urdf`, then load robot.urdf.",
+            )
+        try:
+            if not path.is_file():
+                if path.is_dir():
+                    hint = "it is a directory."
+                elif path.exists():
+                    hint = "it is not a regular file."
+                else:
+                    hint = "no such file."
+                raise URDFError(
+                    f"cannot read the URDF: {hint}",
+                    file=label,
+                    fix="pass the path of a .urdf file, or the XML itself as a string "
+                    "(starting with '<').",
+                )
+            size = path.stat().st_size
+            if size > max_bytes:
+                raise URDFError(
+                    f"the file is {size} bytes, over the {max_bytes}-byte limit (max_bytes).",
+                    file=label,
+                    fix=too_big,
+                )
+            with open(path, "rb") as fh:
+                data = fh.read(max_bytes + 1)
+        except URDFError:
+            raise
+        except (OSError, ValueError) as e:  # ValueError: e.g. an embedded NUL character
+            raise URDFError(
+                f"cannot read the URDF: {getattr(e, 'strerror', None) or e}.",
+                file=label,
+                fix="check the path, or pass the XML itself (a string starting with '<').",
+            ) from None
+        if len(data) > max_bytes:
+            raise URDFError(
+                f"the file is over the {max_bytes}-byte limit (max_bytes).",
+                file=label,
+                fix=too_big,
+            )
+        return data, label
+    raise ModelError(
+        "source must be a URDF path (str or os.PathLike), an XML string or bytes, got "
+        f"{type(source).__name__}."
+    )
+
+
+def _parse_xml(data: bytes | str, label: str) -> _Element:
+    """Parse with expat, refusing any DTD before it is processed; build a light element tree."""
+    is_text = isinstance(data, str)
+    # Leading whitespace (a triple-quoted string's first newline) would make an XML declaration
+    # illegal; drop it and count its lines so that reported line numbers stay the source's.
+    stripped = data.lstrip() if is_text else data.lstrip(b" \t\r\n")
+    skipped = data[: len(data) - len(stripped)]
+    offset = skipped.count("\n" if is_text else b"\n")
+    data = stripped
+    # A str is parsed as UTF-8 whatever its XML declaration says (it is already decoded).
+    parser = expat.ParserCreate(encoding="UTF-8" if is_text else None)
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    fix_dtd = (
+        "remove the <!DOCTYPE ...> block and write the values out; URDF needs no DTD, and jaxkin "
+        "refuses one so that no entity is ever expanded and no external file or URL is read."
+    )
+
+    def refuse(what: str):
+        def handler(*args: Any) -> None:
+            raise URDFError(
+                f"{what} is not allowed in a URDF.",
+                file=label,
+                line=parser.CurrentLineNumber + offset,
+                element=f"<!{what.split()[0]}>" if what.startswith(("DOCTYPE", "ENTITY")) else None,
+                value=str(args[0]) if args and args[0] is not None else None,
+                fix=fix_dtd,
+            )
+
+        return handler
+
+    parser.StartDoctypeDeclHandler = refuse("DOCTYPE (document type declaration)")
+    parser.EntityDeclHandler = refuse("ENTITY declaration")
+    parser.UnparsedEntityDeclHandler = refuse("ENTITY declaration (unparsed)")
+    parser.NotationDeclHandler = refuse("NOTATION declaration")
+    parser.ExternalEntityRefHandler = refuse("external entity reference")
+    parser.ElementDeclHandler = refuse("ELEMENT declaration")
+    parser.AttlistDeclHandler = refuse("ATTLIST declaration")
+
+    root: list[_Element] = []
+    stack: list[_Element] = []
+
+    def start(tag: str, attrib: dict[str, str]) -> None:
+        elem = _Element(tag, attrib, parser.CurrentLineNumber + offset)
+        if tag.startswith("xacro:"):
+            raise URDFError(
+                "xacro macros are not URDF; jaxkin never runs xacro.",
+                file=label,
+                line=elem.line,
+                element=f"<{tag}>",
+                fix="expand the file first: `xacro robot.urdf.xacro > robot.urdf`.",
+            )
+        if stack:
+            stack[-1].children.append(elem)
+        else:
+            root.append(elem)
+        stack.append(elem)
+
+    def end(tag: str) -> None:
+        stack.pop()
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError as e:
+        message = expat.ErrorString(e.code)
+        fix = "fix the XML syntax at that line (a URDF must be well-formed XML)."
+        if "undefined entity" in message:
+            fix = (
+                "write the character out or use one of XML's predefined entities "
+                "(&lt; &gt; &amp; &quot; &apos;); entity declarations are refused."
+            )
+        raise URDFError(
+            f"not well-formed XML: {message} (column {e.offset + 1}).",
+            file=label,
+            line=e.lineno + offset,
+            fix=fix,
+        ) from None
+    except RecursionError:  # pragma: no cover - expat is iterative; belt and braces
+        raise URDFError("the XML is nested too deeply.", file=label) from None
+    if not root:
+        raise URDFError("the document has no root element.", file=label)
+    return root[0]
+
+
+# ---------------------------------------------------------------------------------- validation
+class _Context:
+    """Builds errors that name the file, line, element and attribute."""
+
+    def __init__(self, label: str) -> None:
+        self.file = label
+
+    def error(self, problem: str, elem: _Element | None = None, **kw: Any) -> URDFError:
+        line = kw.pop("line", elem.line if elem is not None else None)
+        return URDFError(problem, file=self.file, line=line, **kw)
+
+    def number(self, elem: _Element, owner: str, attr: str, default: float | None) -> float:
+        text = elem.attrib.get(attr)
+        if text is None:
+            if default is None:
+                raise self.error(
+                    "the attribute is missing.",
+                    elem,
+                    element=owner,
+                    attribute=attr,
+                    fix=f'add {attr}="..." (a number).',
+                )
+            return default
+        return self._to_float(text.strip(), elem, owner, attr, text)
+
+    def vector3(self, elem: _Element, owner: str, attr: str, default: tuple) -> tuple:
+        text = elem.attrib.get(attr)
+        if text is None:
+            return tuple(default)
+        tokens = text.split()
+        if len(tokens) != 3:
+            raise self.error(
+                f"expected 3 numbers separated by spaces, got {len(tokens)}.",
+                elem,
+                element=owner,
+                attribute=attr,
+                value=text,
+                fix=f'write {attr}="x y z", e.g. {attr}="0 0 1".',
+            )
+        return tuple(self._to_float(t, elem, owner, attr, text) for t in tokens)
+
+    def _to_float(self, token: str, elem: _Element, owner: str, attr: str, text: str) -> float:
+        if not _NUMBER.fullmatch(token):
+            if token.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                problem = f"{token!r} is not a finite number."
+                fix = "give a finite number (URDF uses metres and radians)."
+            elif "$" in token or "{" in token:
+                problem = f"{token!r} is a xacro expression, not a number."
+                fix = "expand the file with xacro first: `xacro robot.urdf.xacro > robot.urdf`."
+            else:
+                problem = f"{token!r} is not a number." if token else "the value is empty."
+                fix = "give a decimal number such as 0.1, -2 or 1.5e-3."
+            raise self.error(problem, elem, element=owner, attribute=attr, value=text, fix=fix)
+        x = float(token)
+        if not math.isfinite(x):
+            raise self.error(
+                f"{token!r} overflows to infinity.",
+                elem,
+                element=owner,
+                attribute=attr,
+                value=text,
+                fix="give a finite number.",
+            )
+        return x
+
+    def bounded(self, values: tuple, elem: _Element, owner: str, attr: str, unit: str):
+        big = [x for x in values if abs(x) > MAX_MAGNITUDE]
+        if big:
+            raise self.error(
+                f"{big[0]!r} exceeds {MAX_MAGNITUDE:g}{f' {unit}' if unit else ''} in magnitude.",
+                elem,
+                element=owner,
+                attribute=attr,
+                value=elem.attrib.get(attr),
+                fix=f"URDF is in metres and radians; a value this large is a typo or a unit error "
+                f"(jaxkin accepts |value| <= {MAX_MAGNITUDE:g}).",
+            )
+
+    def single(self, elem: _Element, tag: str, owner: str, required: bool) -> _Element | None:
+        found = [c for c in elem.children if c.tag == tag]
+        if len(found) > 1:
+            raise self.error(
+                f"{len(found)} <{tag}> elements (lines {[c.line for c in found]}); exactly one "
+                "is allowed.",
+                found[1],
+                element=owner,
+                fix=f"keep one <{tag}> and delete the others.",
+            )
+        if not found:
+            if required:
+                raise self.error(
+                    f"the <{tag}> element is missing.",
+                    elem,
+                    element=owner,
+                    fix=f"add <{tag} .../> inside it.",
+                )
+            return None
+        return found[0]
+
+    def name(self, elem: _Element, owner: str, attr: str = "name", example: str = "") -> str:
+        value = elem.attrib.get(attr)
+        if value is None or not value.strip():
+            example = example or {"robot": "my_robot", "link": "link1", "joint": "joint1"}.get(
+                elem.tag, "link1"
+            )
+            raise self.error(
+                f"the {attr!r} attribute is {'missing' if value is None else 'empty'}.",
+                elem,
+                element=owner,
+                attribute=attr,
+                value=value,
+                fix=f'give it a non-empty {attr}, e.g. {attr}="{example}".',
+            )
+        return value
+
+
+def _axis(ctx: _Context, v: tuple, elem: _Element, owner: str, kind: str):
+    norm = math.hypot(*v)  # scales internally: no overflow, no underflow
+    if norm == 0.0:
+        if kind not in MOVING_TYPES:
+            return (1.0, 0.0, 0.0)
+        raise ctx.error(
+            f"the axis of a {kind} joint is a zero vector, which has no direction.",
+            elem,
+            element=owner,
+            attribute="xyz",
+            value=elem.attrib.get("xyz"),
+            fix='give the direction of motion, e.g. xyz="0 0 1".',
+        )
+    u = tuple(x / norm for x in v)
+    if not all(map(math.isfinite, u)):  # pragma: no cover - hypot is finite on finite input
+        raise ctx.error("the axis cannot be normalised.", elem, element=owner, attribute="xyz")
+    return u
+
+
+def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
+    name = ctx.name(elem, "<joint>")
+    owner = f"<joint name={name!r}>"
+    kind = elem.attrib.get("type")
+    if kind is None or kind not in (*SUPPORTED_TYPES, *REFUSED_TYPES):
+        raise ctx.error(
+            "unknown joint type." if kind is not None else "the joint has no type.",
+            elem,
+            element=owner,
+            attribute="type",
+            value=kind,
+            fix=f"use one of {', '.join(SUPPORTED_TYPES)} (floating and planar are refused).",
+        )
+    parent_el = ctx.single(elem, "parent", owner, required=True)
+    child_el = ctx.single(elem, "child", owner, required=True)
+    parent = ctx.name(parent_el, f"<parent> of joint {name!r}", "link")
+    child = ctx.name(child_el, f"<child> of joint {name!r}", "link")
+
+    xyz, rpy = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    origin = ctx.single(elem, "origin", owner, required=False)
+    if origin is not None:
+        where = f"<origin> of joint {name!r}"
+        xyz = ctx.vector3(origin, where, "xyz", (0.0, 0.0, 0.0))
+        ctx.bounded(xyz, origin, where, "xyz", "m")
+        rpy = ctx.vector3(origin, where, "rpy", (0.0, 0.0, 0.0))
+        ctx.bounded(rpy, origin, where, "rpy", "rad")
+
+    axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    axis_el = ctx.single(elem, "axis", owner, required=False)
+    if axis_el is not None:
+        where = f"<axis> of joint {name!r}"
+        v = ctx.vector3(axis_el, where, "xyz", (1.0, 0.0, 0.0))
+        axis = _axis(ctx, v, axis_el, where, kind)
+    if kind not in MOVING_TYPES:
+        axis = (1.0, 0.0, 0.0) if kind == "fixed" else axis
+
+    lower, upper = math.nan, math.nan
+    limit = ctx.single(elem, "limit", owner, required=False)
+    if kind in ("revolute", "prismatic") and limit is None:
+        raise ctx.error(
+            f"a {kind} joint needs a <limit> element (URDF requires one).",
+            elem,
+            element=owner,
+            fix='add <limit lower="..." upper="..." effort="..." velocity="..."/>'
+            + (
+                ", or make it type='continuous' if it turns without limits."
+                if kind == "revolute"
+                else "."
+            ),
+        )
+    if limit is not None:
+        where = f"<limit> of joint {name!r}"
+        lo = ctx.number(limit, where, "lower", 0.0)
+        hi = ctx.number(limit, where, "upper", 0.0)
+        if lo > hi:
+            raise ctx.error(
+                f"lower limit {lo!r} is above upper limit {hi!r}.",
+                limit,
+                element=where,
+                attribute="lower",
+                value=limit.attrib.get("lower"),
+                fix="swap them, or fix the typo (lower <= upper).",
+            )
+        if kind in ("revolute", "prismatic"):
+            lower, upper = lo, hi
+    if kind == "continuous":
+        lower, upper = -math.inf, math.inf
+
+    mimic = None
+    mimic_el = ctx.single(elem, "mimic", owner, required=False)
+    if mimic_el is not None:
+        where = f"<mimic> of joint {name!r}"
+        if kind in REFUSED_TYPES:
+            raise ctx.error(
+                f"a {kind} joint cannot mimic another joint.",
+                mimic_el,
+                element=where,
+                fix="remove the <mimic>, or give the joint a moving type.",
+            )
+        leader = ctx.name(mimic_el, where, "joint", example="joint1")
+        mult = ctx.number(mimic_el, where, "multiplier", 1.0)
+        off = ctx.number(mimic_el, where, "offset", 0.0)
+        for attr, val in (("multiplier", mult), ("offset", off)):
+            ctx.bounded((val,), mimic_el, where, attr, "")
+        mimic = URDFMimic(leader, mult, off, mimic_el.line)
+
+    return URDFJoint(
+        name=name,
+        type=kind,
+        parent=parent,
+        child=child,
+        xyz=xyz,
+        rpy=rpy,
+        axis=axis,
+        lower=float(lower),
+        upper=float(upper),
+        mimic=mimic,
+        line=elem.line,
+    )
+
+
+def _suggest(name: str, candidates: Sequence[str]) -> str:
+    close = difflib.get_close_matches(name, list(candidates), n=3)
+    return f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+
+
+def _topology(ctx: _Context, links: list[URDFLink], joints: list[URDFJoint]) -> str:
+    """Check that links and joints form one tree; return the root link. Iterative."""
+    link_line = {link.name: link.line for link in links}
+    parent_joint: dict[str, URDFJoint] = {}
+    for j in joints:
+        for role, link in (("parent", j.parent), ("child", j.child)):
+            if link not in link_line:
+                raise ctx.error(
+                    f"{role} link {link!r} is not declared by any <link>."
+                    f"{_suggest(link, link_line)}",
+                    line=j.line,
+                    element=f"<{role}> of joint {j.name!r}",
+                    attribute="link",
+                    value=link,
+                    fix=f'declare <link name="{link}"/> or correct the name.',
+                )
+        if j.parent == j.child:
+            raise ctx.error(
+                f"the joint connects link {j.child!r} to itself (a cycle).",
+                line=j.line,
+                element=f"<joint name={j.name!r}>",
+                fix="a joint must join two different links.",
+            )
+        if j.child in parent_joint:
+            other = parent_joint[j.child]
+            raise ctx.error(
+                f"link {j.child!r} has two parents: joint {other.name!r} (line {other.line}) and "
+                f"joint {j.name!r} both name it as their child. A URDF is a tree; closed chains "
+                "are not expressible.",
+                line=j.line,
+                element=f"<child> of joint {j.name!r}",
+                attribute="link",
+                value=j.child,
+                fix="give each link at most one parent joint (remove or re-parent one of them).",
+            )
+        parent_joint[j.child] = j
+    roots = [link.name for link in links if link.name not in parent_joint]
+    # Every link reachable from a root is fine; any other link lies on a cycle (each link has at
+    # most one parent, so walking up from it must come back to itself).
+    children: dict[str, list[str]] = {link.name: [] for link in links}
+    for j in joints:
+        children[j.parent].append(j.child)
+    seen = set(roots)
+    stack = list(roots)
+    while stack:
+        for c in children[stack.pop()]:
+            if c not in seen:
+                seen.add(c)
+                stack.append(c)
+    if len(seen) != len(links):
+        start = next(link.name for link in links if link.name not in seen)
+        path = [start]
+        visited = {start}
+        cur = parent_joint[start].parent
+        while cur not in visited:
+            path.append(cur)
+            visited.add(cur)
+            cur = parent_joint[cur].parent
+        cycle = [*path[path.index(cur) :], cur]
+        cycle.reverse()
+        j = parent_joint[cycle[1]]
+        raise ctx.error(
+            f"the joints form a cycle: {' -> '.join(cycle)}. A URDF is a tree.",
+            line=j.line,
+            element=f"<joint name={j.name!r}>",
+            fix="break the cycle: every link but the root needs exactly one parent joint, and "
+            "following parents must end at the root.",
+        )
+    if len(roots) > 1:
+        shown = roots if len(roots) <= 8 else [*roots[:8], "..."]
+        raise ctx.error(
+            f"the links form {len(roots)} separate trees, with roots {shown}; a URDF has exactly "
+            "one root link.",
+            line=link_line[roots[1]],
+            element=f"<link name={roots[1]!r}>",
+            fix="connect every root but one to the robot with a joint, or delete the stray links.",
+        )
+    return roots[0]
+
+
+def _resolve_mimics(
+    ctx: _Context, joints: Sequence[URDFJoint]
+) -> dict[str, tuple[str, float, float]]:
+    """Validate every ``<mimic>`` and resolve each moving mimic joint to the independent joint
+    at the end of its chain: ``{name: (leader, M, O)}`` with ``value = M * q[leader] + O``.
+
+    Linear time (each joint is resolved once, memoised) and iterative.
+    """
+    by_name = {j.name: j for j in joints}
+    resolved: dict[str, tuple[str, float, float]] = {}
+
+    def missing(j: URDFJoint, fix: str) -> URDFError:
+        leader = j.mimic.joint
+        return ctx.error(
+            f"it mimics joint {leader!r}, which does not exist.{_suggest(leader, by_name)}",
+            line=j.mimic.line,
+            element=f"<mimic> of joint {j.name!r}",
+            attribute="joint",
+            value=leader,
+            fix=fix,
+        )
+
+    for j in joints:
+        if j.mimic is None:
+            continue
+        if j.type == "fixed":
+            # Ignored, as urdfdom and Pinocchio do (Talos' grippers have such joints), but a
+            # leader that does not exist is still an error.
+            if j.mimic.joint not in by_name:
+                raise missing(
+                    j,
+                    "name an existing joint, or delete the <mimic> (a fixed joint does not move, "
+                    "so its <mimic> has no effect).",
+                )
+            continue
+        path: list[URDFJoint] = []
+        on_path: dict[str, int] = {}
+        cur = j
+        while cur.mimic is not None and cur.name not in resolved:
+            on_path[cur.name] = len(path)
+            path.append(cur)
+            leader = cur.mimic.joint
+            where = f"<mimic> of joint {cur.name!r}"
+            if leader not in by_name:
+                raise missing(cur, "name an existing revolute, continuous or prismatic joint.")
+            target = by_name[leader]
+            if target.type not in MOVING_TYPES:
+                raise ctx.error(
+                    f"it mimics joint {leader!r}, which is {target.type}.",
+                    line=cur.mimic.line,
+                    element=where,
+                    attribute="joint",
+                    value=leader,
+                    fix="a mimic joint must follow a revolute, continuous or prismatic joint.",
+                )
+            if leader in on_path:
+                cycle = [p.name for p in path[on_path[leader] :]] + [leader]
+                raise ctx.error(
+                    f"mimic joints form a cycle ({' -> '.join(cycle)}): none of them is "
+                    "independent.",
+                    line=cur.mimic.line,
+                    element=where,
+                    attribute="joint",
+                    value=leader,
+                    fix="remove the <mimic> of one joint of the cycle, so that it drives the "
+                    "others.",
+                )
+            cur = target
+        # value_node = m * value_next + o and value_next = M * q + O compose to
+        # value_node = (m M) q + (m O + o).
+        leader, M, O = resolved.get(cur.name, (cur.name, 1.0, 0.0))
+        for node in reversed(path):
+            m, o = node.mimic.multiplier, node.mimic.offset
+            M, O = m * M, m * O + o
+            resolved[node.name] = (leader, M, O)
+    return resolved
+
+
+def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
+    """Read and validate a URDF; return its description (:class:`URDFModel`).
+
+    Args:
+      source: a path (``str`` or ``os.PathLike``), the XML as a ``str`` (starting with ``<``,
+        after optional whitespace) or as ``bytes``.
+      max_bytes: size cap, checked before parsing.
+
+    Raises:
+      URDFError: for any invalid or refused input (see the module doc).
+    """
+    if not isinstance(max_bytes, int) or isinstance(max_bytes, bool) or max_bytes <= 0:
+        raise ModelError(f"max_bytes must be a positive integer, got {max_bytes!r}.")
+    data, label = _read_source(source, max_bytes)
+    root = _parse_xml(data, label)
+    ctx = _Context(label)
+    if root.tag != "robot":
+        hint = {
+            "sdf": "this is an SDF file",
+            "mujoco": "this is an MJCF (MuJoCo) file",
+        }.get(root.tag, f"the root element is <{root.tag}>")
+        raise ctx.error(
+            f"{hint}, not a URDF (whose root element is <robot>).",
+            root,
+            element=f"<{root.tag}>",
+            fix="pass a URDF file.",
+        )
+    links: list[URDFLink] = []
+    link_line: dict[str, int] = {}
+    joints: list[URDFJoint] = []
+    joint_line: dict[str, int | None] = {}
+    for elem in root.children:
+        if elem.tag == "link":
+            name = ctx.name(elem, "<link>")
+            if name in link_line:
+                raise ctx.error(
+                    f"link {name!r} is declared twice (first on line {link_line[name]}).",
+                    elem,
+                    element=f"<link name={name!r}>",
+                    attribute="name",
+                    value=name,
+                    fix="link names must be unique: rename or delete one.",
+                )
+            link_line[name] = elem.line
+            links.append(URDFLink(name, elem.line))
+        elif elem.tag == "joint":
+            j = _joint(ctx, elem)
+            if j.name in joint_line:
+                raise ctx.error(
+                    f"joint {j.name!r} is declared twice (first on line {joint_line[j.name]}).",
+                    elem,
+                    element=f"<joint name={j.name!r}>",
+                    attribute="name",
+                    value=j.name,
+                    fix="joint names must be unique: rename or delete one.",
+                )
+            joint_line[j.name] = j.line
+            joints.append(j)
+    if not links:
+        raise ctx.error(
+            "the robot has no <link>.",
+            root,
+            element="<robot>",
+            fix="a URDF needs at least one link (is this an unexpanded or empty xacro output?).",
+        )
+    robot_name = ctx.name(root, "<robot>")
+    root_link = _topology(ctx, links, joints)
+    _resolve_mimics(ctx, joints)
+    return URDFModel(robot_name, label, tuple(links), tuple(joints), root_link)
+
+
+# ---------------------------------------------------------------------------------- building
+def _select(
+    model: URDFModel, tip: str | None, base: str | None, ctx: _Context
+) -> tuple[str, list[URDFJoint]]:
+    """The root link and the joints (parents first) of the selected chain or subtree."""
+    names = model.link_names
+    for what, link in (("base", base), ("tip", tip)):
+        if link is not None and (not isinstance(link, str) or link not in names):
+            raise ctx.error(
+                f"{what}={link!r} is not a link of robot {model.name!r}."
+                f"{_suggest(str(link), names)}",
+                fix=f"pass the name of a link ({len(names)} links, e.g. {list(names[:5])}).",
+            )
+    start = model.root if base is None else base
+    if tip is None:
+        return start, list(model.depth_first(start))
+    parent_joint = {j.child: j for j in model.joints}
+    path: list[URDFJoint] = []
+    link = tip
+    while link != start:
+        if link not in parent_joint:
+            raise ctx.error(
+                f"tip {tip!r} is not below base {start!r}: the path from the root "
+                f"{model.root!r} to {tip!r} does not pass through {start!r}.",
+                fix="choose a base link that is an ancestor of the tip (or leave base=None).",
+            )
+        j = parent_joint[link]
+        path.append(j)
+        link = j.parent
+    path.reverse()
+    return start, path
+
+
+def _refuse_unsupported(ctx: _Context, joints: list[URDFJoint]) -> None:
+    for j in joints:
+        if j.type in REFUSED_TYPES:
+            dof = "6-DOF free motion" if j.type == "floating" else "3-DOF motion in a plane"
+            raise ctx.error(
+                f"joint {j.name!r} is {j.type} ({dof}); jaxkin models revolute, continuous, "
+                "prismatic and fixed joints only, and does not weld it silently.",
+                line=j.line,
+                element=f"<joint name={j.name!r}>",
+                attribute="type",
+                value=j.type,
+                fix=f"load what hangs below it with base={j.child!r} (poses are then relative "
+                f"to {j.child!r}), or change its type in the file (e.g. to fixed).",
+            )
+
+
+def load_urdf(
+    source: Any,
+    tip: str | None = None,
+    base: str | None = None,
+    *,
+    max_bytes: int = DEFAULT_MAX_BYTES,
+    dtype: Any = None,
+    name: str | None = None,
+) -> Robot:
+    """Load a URDF as a :class:`~jaxkin.Robot` (a placement robot; see the module doc).
+
+    Args:
+      source: a path (``str`` or ``os.PathLike``), the XML as ``str`` or ``bytes``.
+      tip: optional link name: keep only the chain from ``base`` to ``tip`` (the default frame of
+        ``fk``/``geometric_jacobian`` is then ``tip``).
+      base: optional link name: the root of the model (default: the URDF's root link). Its frame
+        is the world frame of the result; joints above it are dropped.
+      max_bytes: size cap (default 16 MiB), checked before parsing.
+      dtype: float32 or float64 (default: JAX's default float).
+      name: the robot's name (default: the URDF's ``<robot name>``).
+
+    Returns:
+      A robot whose ``frame_names`` are the selected links (``base`` first, then depth-first,
+      siblings in file order), whose ``joint_names`` are the independent joints (``q`` order) and
+      whose limits are the URDF's (continuous joints unbounded). Without ``tip`` the default
+      frame is the last link in depth-first order: pass ``frame=`` explicitly for a tree.
+
+    Raises:
+      URDFError: invalid or refused file (a :class:`jaxkin.ModelError`), with file, line,
+        element, attribute, value and a fix in the message.
+    """
+    model = parse_urdf(source, max_bytes=max_bytes)
+    ctx = _Context(model.file)
+    root, joints = _select(model, tip, base, ctx)
+    _refuse_unsupported(ctx, joints)
+    if not any(j.type in MOVING_TYPES for j in joints):
+        what = "chain" if tip is not None else "tree"
+        raise ctx.error(
+            f"the selected {what} (root {root!r}{f', tip {tip!r}' if tip else ''}) has no moving "
+            f"joint: {len(joints)} joint(s), all fixed. jaxkin needs at least one degree of "
+            "freedom.",
+            fix="select a part of the robot with a revolute, continuous or prismatic joint.",
+        )
+    selected = {j.name for j in joints}
+    by_name = model.joint_map
+    leaders = _resolve_mimics(ctx, model.joints)
+    specs = []
+    orphans: dict[str, tuple[str, float, float]] = {}  # follower -> (outside leader, M, O)
+    for j in joints:
+        spec: dict[str, Any] = {
+            "name": j.name,
+            "type": "fixed"
+            if j.type == "fixed"
+            else ("prismatic" if j.type == "prismatic" else "revolute"),
+            "parent": j.parent,
+            "child": j.child,
+            "xyz": j.xyz,
+            "rpy": j.rpy,
+            "axis": j.axis,
+        }
+        if j.type in MOVING_TYPES:
+            spec["lower"], spec["upper"] = j.lower, j.upper
+        if j.mimic is not None and j.type in MOVING_TYPES:
+            leader, M, O = leaders[j.name]
+            if leader in selected:
+                spec["mimic"] = {"joint": leader, "multiplier": M, "offset": O}
+            else:
+                orphans[j.name] = (leader, M, O)
+        specs.append(spec)
+    try:
+        robot = Robot.from_joints(specs, root=root, name=name or model.name, dtype=dtype)
+    except URDFError:
+        raise
+    except ModelError as e:  # pragma: no cover - the parser validates everything first
+        raise ctx.error(f"invalid model: {e}") from None
+    if orphans:
+        robot = _drive_orphans(robot, orphans, by_name)
+    return robot
+
+
+def _drive_orphans(
+    robot: Robot, orphans: dict[str, tuple[str, float, float]], by_name: dict[str, URDFJoint]
+) -> Robot:
+    """Re-point mimic joints whose leader is outside the selection at a q entry named after
+    the leader (shared by every follower of that leader), with the leader's limits."""
+    old_names = list(robot.joint_names)
+    new_names: list[str] = []
+    lower, upper = [], []
+    old_lower = np.asarray(robot.lower, dtype=np.float64)
+    old_upper = np.asarray(robot.upper, dtype=np.float64)
+    remap: dict[int, int] = {}
+    for i, n in enumerate(old_names):
+        key = orphans[n][0] if n in orphans else n
+        if key not in new_names:
+            new_names.append(key)
+            if n in orphans:
+                lead = by_name[key]
+                lower.append(lead.lower)
+                upper.append(lead.upper)
+            else:
+                lower.append(float(old_lower[i]))
+                upper.append(float(old_upper[i]))
+        remap[i] = new_names.index(key)
+    mult = np.asarray(robot.multiplier, dtype=np.float64).copy()
+    off = np.asarray(robot.offset, dtype=np.float64).copy()
+    q_index = []
+    for j, qi in enumerate(robot.q_index):
+        if qi < 0:
+            q_index.append(qi)
+            continue
+        q_index.append(remap[qi])
+        # An orphan follower was built as an independent joint: its old q entry is its own.
+        name = old_names[qi]
+        if name in orphans:
+            _, M, O = orphans[name]
+            mult[j], off[j] = M, O
+    dt = robot.dtype
+    return dataclasses.replace(
+        robot,
+        q_index=tuple(q_index),
+        joint_names=tuple(new_names),
+        multiplier=jnp.asarray(mult, dtype=dt),
+        offset=jnp.asarray(off, dtype=dt),
+        lower=jnp.asarray(np.array(lower), dtype=dt),
+        upper=jnp.asarray(np.array(upper), dtype=dt),
+    )

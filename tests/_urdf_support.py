@@ -1,0 +1,193 @@
+"""Shared helpers of the URDF tests: example-robot-data paths, configuration sampling, the batched
+jaxkin kernel (one compile per robot, shared by the Pinocchio and MuJoCo tests), and the map
+between jaxkin's q and Pinocchio's.
+
+Pinocchio is always built here with ``mimic=False`` (every moving URDF joint independent, which
+Pinocchio supports for every file) and jaxkin's mimic folding is checked against it through the
+linear map ``S`` (``J_jaxkin = J_pin @ S``, ``q_pin = pin_q(q)``): a mimic joint's value is
+``multiplier * q[leader] + offset`` and its column folds into the leader's with its multiplier.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _sampling import sample_configurations
+from _xla import FAST_COMPILE
+
+import jaxkin as jk
+from jaxkin.robots import example_robot_data as erd
+from jaxkin.urdf import URDFModel, parse_urdf
+
+DATA = Path(__file__).parent / "data"
+REFERENCES = ("world_aligned", "local", "world")
+FULL_CORPUS = os.environ.get("JAXKIN_FULL_CORPUS") == "1"
+
+
+def erd_root() -> Path | None:
+    return erd.robots_dir()
+
+
+def tolerance(Ts: np.ndarray) -> float:
+    """1e-12 * max(1, reach), the reach being the farthest frame origin seen."""
+    return 1e-12 * max(1.0, float(np.max(np.linalg.norm(Ts[..., :3, 3], axis=-1))))
+
+
+# ----------------------------------------------------------------------------------- cases
+N_CONFIGS = 25
+SEED = 20240611
+
+
+def case_path(key: str) -> Path:
+    """``"erd/<name>"`` (example-robot-data registry name) or ``"data/<file>"`` (tests/data)."""
+    if key.startswith("data/"):
+        return DATA / key.removeprefix("data/")
+    return erd.path(key)
+
+
+def point_frames(robot: jk.Robot) -> list[str]:
+    """Frames whose point Jacobian (at POINT) the shared kernel also computes: the last link in
+    depth-first order, the frame before it and one in the middle (for MuJoCo's mj_jac)."""
+    names = robot.frame_names
+    return sorted({names[-1], names[-2], names[len(names) // 2]}, key=names.index)
+
+
+POINT = np.array([0.03, -0.02, 0.05])  # m, in the frame's own axes
+
+
+@dataclass
+class Case:
+    key: str
+    path: Path
+    robot: jk.Robot
+    urdf: URDFModel
+    qs: np.ndarray
+    out: dict[str, np.ndarray]
+    seconds: float  # trace + compile + run of the kernel
+
+
+@functools.cache
+def oracle_case(key: str, frames: str = "all") -> Case:
+    """Load ``key`` in float64 and evaluate, at N_CONFIGS random configurations (fixed seed):
+    ``fk_all``, the geometric Jacobian of every frame in every reference (``frames="all"``), and
+    the world_aligned point Jacobian at POINT of :func:`point_frames` (keys ``"<frame>/point"``).
+    Cached: the Pinocchio and MuJoCo tests share one compile per robot."""
+    path = case_path(key)
+    robot = jk.load_urdf(path, dtype=np.float64)
+    urdf = parse_urdf(path)
+    qs = sample_configurations(robot, N_CONFIGS, SEED)
+    names = list(robot.frame_names) if frames == "all" else []
+    pf = point_frames(robot)
+
+    def one(q):
+        out = {"Ts": jk.fk_all(robot, q)}
+        for f in names:
+            for ref in REFERENCES:
+                out[f"{f}/{ref}"] = jk.geometric_jacobian(robot, q, frame=f, reference=ref)
+        for f in pf:
+            out[f"{f}/point"] = jk.geometric_jacobian(robot, q, frame=f, point=POINT)
+        return out
+
+    t0 = time.perf_counter()
+    f = jax.jit(lambda qs: jax.lax.map(one, qs), compiler_options=FAST_COMPILE)
+    out = jax.tree_util.tree_map(np.asarray, f(jnp.asarray(qs)))
+    return Case(key, path, robot, urdf, qs, out, time.perf_counter() - t0)
+
+
+class PinocchioMap:
+    """jaxkin q <-> Pinocchio (``mimic=False``) q and v, and link frames, matched by name."""
+
+    def __init__(self, robot: jk.Robot, urdf: URDFModel, model) -> None:
+        import pinocchio as pin
+
+        self.model = model
+        by_name = urdf.joint_map
+        dof_index = {n: i for i, n in enumerate(robot.joint_names)}
+        self.nq, self.nv = model.nq, model.nv
+        self.S = np.zeros((model.nv, robot.dof))
+        self._terms = []  # (idx_q, nq, dof index or -1, multiplier, offset)
+        for jid in range(1, model.njoints):
+            name = model.names[jid]
+            joint = model.joints[jid]
+            leader, m, o = name, 1.0, 0.0
+            j = by_name[name]
+            while j.mimic is not None:  # resolve the mimic chain, as jaxkin does
+                m, o = m * j.mimic.multiplier, m * j.mimic.offset + o
+                j = by_name[j.mimic.joint]
+                leader = j.name
+            i = dof_index.get(leader, -1)
+            if i >= 0:
+                self.S[joint.idx_v, i] = m
+            self._terms.append((joint.idx_q, joint.nq, i, m, o))
+        self.frame_ids = []
+        for fname in robot.frame_names:
+            assert model.existFrame(fname, pin.BODY), fname
+            self.frame_ids.append(model.getFrameId(fname, pin.BODY))
+
+    def q(self, q: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.nq)
+        for idx_q, nq, i, m, o in self._terms:
+            value = m * q[i] + o if i >= 0 else 0.0
+            if nq == 1:
+                out[idx_q] = value
+            else:  # continuous joint: (cos, sin)
+                out[idx_q : idx_q + 2] = math.cos(value), math.sin(value)
+        return out
+
+
+def pinocchio_frames_and_jacobians(pmap: PinocchioMap, q: np.ndarray, with_jacobians=True):
+    """Pinocchio's T_world_frame of every jaxkin frame and its Jacobians (mapped to jaxkin's q),
+    {ref: (n_frames, 6, dof)}."""
+    import pinocchio as pin
+
+    model = pmap.model
+    data = model.createData()
+    qp = pmap.q(q)
+    pin.framesForwardKinematics(model, data, qp)
+    Ts = np.stack([data.oMf[fid].homogeneous for fid in pmap.frame_ids])
+    if not with_jacobians:
+        return Ts, None
+    pin.computeJointJacobians(model, data, qp)
+    pin.updateFramePlacements(model, data)
+    rfs = {"world_aligned": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL, "world": pin.WORLD}
+    Js = {
+        ref: np.stack(
+            [pin.getFrameJacobian(model, data, fid, rf) @ pmap.S for fid in pmap.frame_ids]
+        )
+        for ref, rf in rfs.items()
+    }
+    return Ts, Js
+
+
+def pinocchio_model(source: Path | str, mimic: bool = False):
+    import pinocchio as pin
+
+    xml = Path(source).read_text() if isinstance(source, Path) else source
+    return pin.buildModelFromXML(xml, mimic=mimic)
+
+
+__all__ = [
+    "DATA",
+    "FULL_CORPUS",
+    "POINT",
+    "REFERENCES",
+    "Case",
+    "PinocchioMap",
+    "case_path",
+    "erd_root",
+    "oracle_case",
+    "parse_urdf",
+    "pinocchio_frames_and_jacobians",
+    "pinocchio_model",
+    "point_frames",
+    "sample_configurations",
+    "tolerance",
+]
