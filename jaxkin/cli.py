@@ -1,10 +1,16 @@
 """The ``jaxkin`` command line.
 
-``jaxkin velocities [ROBOT] --n N`` samples N configurations and joint velocities of a zoo robot,
-computes for each the hand-built geometric Jacobian, the autodiff one (``jax.jacfwd``) as a check,
-the analytical Jacobian with its representation margin, the twist ``J @ qd`` and the singular
-values of ``J``, in compiled chunks (:func:`jaxkin.batch.chunked_map`); prints a summary and
-writes everything to an ``.npz`` file. ``jaxkin robots`` lists the zoo.
+* ``jaxkin robots`` lists the zoo and the example-robot-data URDFs that load by name.
+* ``jaxkin jacobian ROBOT --q ...`` prints the geometric (or analytical) Jacobian of one
+  configuration as a labelled table, stating its frame, reference and row order.
+* ``jaxkin velocities [ROBOT] --n N`` samples N configurations and joint velocities (or reads them
+  from a CSV/NPZ file with ``--configurations``) and computes for each the hand-built geometric
+  Jacobian, the autodiff one (``jax.jacfwd``) as a check, the analytical Jacobian with its
+  representation margin, the twist ``J @ qd`` and the singular values of ``J``, in compiled chunks
+  (:func:`jaxkin.batch.chunked_map`); prints a summary and writes an ``.npz`` or ``.csv`` file.
+
+ROBOT is a zoo name (``jaxkin robots``), an example-robot-data name (``erd/panda``) or the path of
+a URDF file.
 
 Exit codes: 0 success; 1 the hand-built and autodiff Jacobians disagree (FAIL); 2 a usage error
 (one line on stderr starting ``jaxkin: error:``); 130 interrupted.
@@ -14,8 +20,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import math
 import os
+import pathlib
+import re
 import sys
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -31,7 +40,14 @@ from .batch import ProgressBar, chunked_map
 from .jacobians import REFERENCES
 from .representations import REPRESENTATIONS
 
-__all__ = ["main", "sample_configurations", "velocity_kernel"]
+__all__ = [
+    "format_jacobian",
+    "load_robot",
+    "main",
+    "read_configurations",
+    "sample_configurations",
+    "velocity_kernel",
+]
 
 PROGRESS_MIN_N = 200_000
 # Rows per compiled call. Smaller than chunked_map's default: this kernel (three Jacobians and an
@@ -41,6 +57,9 @@ CLI_CHUNK_SIZE = 4096
 CHECK_TOL = {"float64": 1e-10, "float32": 1e-4}
 # Half-width of the sampling interval on an unbounded side: radians (revolute), metres (prismatic).
 UNBOUNDED_HALF_WIDTH = {"revolute": math.pi, "prismatic": 1.0}
+DEFAULT_N = 100_000
+URDF_SUFFIXES = (".urdf", ".xml")
+OUTPUT_FORMATS = ("npz", "csv")
 
 
 class UsageError(Exception):
@@ -48,6 +67,14 @@ class UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
+    # Values such as -1e-3 or -0.4,0.6 (a --q list) are numbers, not options: argparse's own
+    # pattern knows only -1 and -0.4.
+    _NEGATIVE_NUMBERS = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+.\deE,\s]*)?$")
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = self._NEGATIVE_NUMBERS
+
     def error(self, message: str):  # argparse prints usage and exits; we report one line
         raise UsageError(f"{message} (see '{self.prog} --help')")
 
@@ -127,12 +154,52 @@ check:
   max |J_handbuilt - J_jacfwd| over all entries and configurations must be at most
   {CHECK_TOL["float64"]:g} (float64) or {CHECK_TOL["float32"]:g} (float32); otherwise FAIL, exit 1.
 
-output (.npz, written to a temporary file in the same directory, then renamed):
-  q (N, dof), qd (N, dof), twist (N, 6) = J @ qd, J (N, 6, dof) geometric at --reference,
-  Ja (N, 6, dof) analytical d[p; phi]/dq, margin (N,), sigma (N, min(6, dof)); metadata robot,
-  joint_names, frame, reference, representation, dtype, seed, qd_scale, singular_tol,
-  jaxkin_version. Rows of J and twist are [v; omega].
+configurations file (--configurations PATH, instead of sampling):
+  .npz: an array q of shape (N, dof) (or (dof,) for one configuration) and optionally qd of the
+  same shape. .csv (any other suffix): one configuration per line, comma-separated; lines
+  starting with # are comments. Without a header line a row holds dof values (q) or 2 dof values
+  (q then qd), in robot.joint_names order. With a header line, its columns are joint names
+  (or q_<joint>) and optionally qd_<joint>, in any order. Without qd in the file, qd is sampled as
+  above. Values outside the joint limits are used as given and counted in the summary.
+
+output (written to a temporary file in the same directory, then renamed):
+  --format npz (default; also chosen by an --output ending in .npz): q (N, dof), qd (N, dof),
+  twist (N, 6) = J @ qd, J (N, 6, dof) geometric at --reference, Ja (N, 6, dof) analytical
+  d[p; phi]/dq, margin (N,), sigma (N, min(6, dof)); metadata robot, joint_names, frame,
+  reference, representation, dtype, seed, qd_scale, singular_tol, jaxkin_version.
+  --format csv (also chosen by an --output ending in .csv): one line per configuration with
+  columns q_<joint>, qd_<joint>, vx, vy, vz, wx, wy, wz (the twist), sigma_1 ... sigma_k, margin,
+  after # comment lines holding the metadata; J and Ja are in the .npz only.
+  Rows of J and twist are [v; omega].
 """
+
+
+_ROBOT_HELP = "zoo name, erd/<name> (example-robot-data) or a URDF file path; see 'jaxkin robots'"
+
+_JACOBIAN_EPILOG = """\
+rows and columns:
+  geometric (default): rows vx vy vz [m/s] and wx wy wz [rad/s] per unit joint rate: the twist
+  [v; omega] = J @ qd. --reference world_aligned: v is the velocity of the frame's origin (or
+  --point), both in world axes (the textbook's J; Pinocchio LOCAL_WORLD_ALIGNED, RTB jacob0);
+  local: the same point, in the frame's own axes; world: v of the body point at the world origin.
+  --analytical REPR: rows x y z and the three angles of REPR (rpy: roll pitch yaw of
+  R = Rz(yaw) Ry(pitch) Rx(roll)); the derivative d[p; phi]/dq. Columns follow robot.joint_names;
+  a column is per rad/s (revolute joint) or per m/s (prismatic).
+
+examples:
+  jaxkin jacobian niryo_one --q 0 -0.5 0.3 0 0.4 0
+  jaxkin jacobian puma560 --config qn --reference local --format csv
+  jaxkin jacobian robot.urdf --tip tool0 --q 0.1,0.2,0.3,0.4,0.5,0.6 --analytical rpy
+"""
+
+
+def _add_robot_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--tip",
+        metavar="LINK",
+        help="URDF robots: keep only the chain from --base to this link (the default frame)",
+    )
+    p.add_argument("--base", metavar="LINK", help="URDF robots: the link taken as the world frame")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -143,8 +210,86 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"jaxkin {jk.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    robots = sub.add_parser("robots", help="list the robot zoo", description="List the zoo.")
+    robots = sub.add_parser(
+        "robots",
+        help="list the robot zoo and the URDF robots that load by name",
+        description=(
+            "List the zoo (name and description), then the example-robot-data URDFs that load\n"
+            "by name (erd/..., when example-robot-data is installed). Any URDF file also works\n"
+            "as ROBOT: give its path."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    robots.add_argument("--zoo", action="store_true", help="list only the zoo")
     robots.set_defaults(handler=cmd_robots)
+
+    jac = sub.add_parser(
+        "jacobian",
+        help="print the Jacobian of one configuration",
+        description=(
+            "Print the 6 x dof Jacobian of one configuration, rows labelled, columns named by\n"
+            "joint, with its frame, reference (which point's velocity, in which axes) and row\n"
+            "order stated. Geometric by default: [v; omega] = J @ qd."
+        ),
+        epilog=_JACOBIAN_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    jac.set_defaults(handler=cmd_jacobian)
+    jac.add_argument("robot", metavar="ROBOT", help=_ROBOT_HELP)
+    where = jac.add_mutually_exclusive_group()
+    where.add_argument(
+        "--q",
+        nargs="+",
+        metavar="VALUE",
+        help="joint values, one per joint in robot.joint_names order (rad or m); spaces or "
+        "commas between them (default: all zero)",
+    )
+    where.add_argument(
+        "--config", metavar="NAME", help="a named configuration of a zoo robot (e.g. home, qr)"
+    )
+    jac.add_argument(
+        "--frame",
+        type=_frame,
+        default=None,
+        help="frame name or index (default: the tip, tool included)",
+    )
+    jac.add_argument(
+        "--point",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="the point whose velocity the linear rows give, as an offset from the frame's "
+        "origin in the frame's axes (m; default: the origin)",
+    )
+    jac.add_argument(
+        "--reference",
+        choices=REFERENCES,
+        default="world_aligned",
+        help="point and basis of a geometric Jacobian (default: %(default)s)",
+    )
+    jac.add_argument(
+        "--analytical",
+        choices=REPRESENTATIONS,
+        metavar="REPR",
+        help="print the analytical Jacobian d[p; phi]/dq instead, phi in REPR "
+        f"({', '.join(REPRESENTATIONS)})",
+    )
+    jac.add_argument(
+        "--format",
+        choices=("text", "csv", "json"),
+        default="text",
+        help="output format (default: %(default)s)",
+    )
+    jac.add_argument(
+        "--digits", type=_positive_int, default=4, help="decimals in text output (default: 4)"
+    )
+    _add_robot_options(jac)
+    jac.add_argument(
+        "--dtype",
+        choices=("float32", "float64"),
+        default="float64",
+        help="float precision (default: %(default)s)",
+    )
 
     vel = sub.add_parser(
         "velocities",
@@ -163,10 +308,20 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="?",
         default="niryo_one",
         metavar="ROBOT",
-        help="zoo robot name (default: %(default)s; see 'jaxkin robots')",
+        help=_ROBOT_HELP + " (default: %(default)s)",
     )
-    vel.add_argument(
-        "--n", type=_positive_int, default=100_000, help="configurations (default: %(default)s)"
+    _add_robot_options(vel)
+    count = vel.add_mutually_exclusive_group()
+    count.add_argument(
+        "--n",
+        type=_positive_int,
+        default=None,
+        help=f"configurations to sample (default: {DEFAULT_N})",
+    )
+    count.add_argument(
+        "--configurations",
+        metavar="PATH",
+        help="read q (and optionally qd) from a .npz or .csv file instead of sampling; see below",
     )
     vel.add_argument("--seed", type=_seed, default=0, help="random seed (default: %(default)s)")
     vel.add_argument(
@@ -185,9 +340,15 @@ def build_parser() -> argparse.ArgumentParser:
     out.add_argument(
         "--output",
         metavar="PATH",
-        help="output file (default: velocities_<robot>_<n>.npz in the current directory)",
+        help="output file (default: velocities_<robot>_<n>.<format> in the current directory)",
     )
     out.add_argument("--no-output", action="store_true", help="compute and summarise only")
+    vel.add_argument(
+        "--format",
+        choices=OUTPUT_FORMATS,
+        default=None,
+        help="output format (default: from the --output suffix, else npz; see below)",
+    )
     vel.add_argument(
         "--frame",
         type=_frame,
@@ -239,7 +400,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
     if args.command is None:
-        return _usage_error("choose a command: velocities or robots (see 'jaxkin --help')")
+        return _usage_error(
+            "choose a command: velocities, jacobian or robots (see 'jaxkin --help')"
+        )
     try:
         return args.handler(args)
     except (UsageError, jk.JaxkinError) as e:
@@ -247,6 +410,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("jaxkin: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. 'jaxkin robots | head': the reader left; stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 def _usage_error(message: str) -> int:
@@ -261,7 +428,67 @@ def cmd_robots(args: argparse.Namespace) -> int:
     width = max(len(n) for n in names)
     for name in names:
         print(f"{name:<{width}}  {jk.robots.info(name).description}")
+    if args.zoo:
+        return 0
+    urdf = _urdf_robot_names()
+    print()
+    if urdf:
+        print(f"# {len(urdf)} URDF robots of example-robot-data, loaded by name (e.g. {urdf[0]}):")
+        for name in urdf:
+            print(name)
+    else:
+        print("# URDF robots: install example-robot-data for more by name (erd/...)")
+    print("# any URDF file also works as ROBOT: give its path")
     return 0
+
+
+def _urdf_robot_names() -> list[str]:
+    """The example-robot-data names the zoo offers, [] when this jaxkin or the package lacks it."""
+    erd_names = getattr(jk.robots, "erd_names", None)
+    return list(erd_names()) if erd_names is not None else []
+
+
+def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None = None):
+    """The robot ``spec`` names: a URDF path, a zoo name or an ``erd/...`` name.
+
+    Names win over files: a file called like a zoo robot needs a path (``./niryo_one``). Returns
+    ``(robot, label)``; ``label`` names output files. Every user mistake is a
+    :class:`UsageError` or a :class:`jaxkin.JaxkinError` (a bad file's message names it).
+    """
+    zoo = jk.robots.names()
+    urdf = _urdf_robot_names()
+    if spec not in zoo and spec not in urdf:
+        path = pathlib.Path(spec)
+        if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or path.exists():
+            return _load_urdf_file(path, dtype, tip, base), path.stem
+        more = f" or one of {len(urdf)} erd/... URDF robots" if urdf else ""
+        raise UsageError(
+            f"unknown robot {spec!r}; choose one of {', '.join(zoo)}{more}, or give a URDF file "
+            "path (see 'jaxkin robots')"
+        )
+    options = {k: v for k, v in (("tip", tip), ("base", base)) if v is not None}
+    if options and spec in zoo:
+        raise UsageError(
+            f"--tip and --base apply to URDF robots; {spec!r} is a zoo model (use --frame)"
+        )
+    return jk.robots.load(spec, dtype=dtype, **options), spec.replace("/", "_")
+
+
+def _load_urdf_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None):
+    load_urdf = getattr(jk, "load_urdf", None)
+    if load_urdf is None:
+        raise UsageError(
+            f"cannot load {path}: this jaxkin {jk.__version__} has no URDF support (jk.load_urdf); "
+            "use a zoo robot (see 'jaxkin robots')"
+        )
+    if not path.exists():
+        raise UsageError(f"no such URDF file: {path}")
+    if not path.is_file():
+        raise UsageError(f"{path} is not a file; give the path of a .urdf file")
+    try:
+        return load_urdf(path, tip=tip, base=base, dtype=dtype)
+    except OSError as e:
+        raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
 
 
 # ---------------------------------------------------------------------- velocities
@@ -358,12 +585,16 @@ class AtomicOutput:
         os.close(fd)
         return self
 
-    def commit(self, arrays: dict[str, np.ndarray]) -> None:
+    def commit(self, arrays: dict[str, np.ndarray], fmt: str = "npz") -> None:
+        """Write ``arrays`` (``np.savez``, or :func:`_write_csv` for ``fmt="csv"``), then rename."""
         if self.tmp is None:
             raise RuntimeError("AtomicOutput.commit must be called once, inside its 'with' block")
         try:
             with open(self.tmp, "wb") as f:
-                np.savez(f, **arrays)
+                if fmt == "csv":
+                    _write_csv(f, arrays)
+                else:
+                    np.savez(f, **arrays)
                 f.flush()
                 os.fsync(f.fileno())
             umask = os.umask(0)
@@ -382,32 +613,185 @@ class AtomicOutput:
 
 
 def cmd_velocities(args: argparse.Namespace) -> int:
-    if args.robot not in jk.robots.names():
-        raise UsageError(
-            f"unknown robot {args.robot!r}; choose one of {', '.join(jk.robots.names())} "
-            "(see 'jaxkin robots')"
-        )
     with _x64(args.dtype == "float64"):
-        robot = jk.robots.load(args.robot, dtype=args.dtype)
+        robot, label = load_robot(args.robot, args.dtype, args.tip, args.base)
         frame_name = robot.frame_names[robot.frame_index(args.frame)]
+        dtype = np.dtype(args.dtype)
+        if args.configurations is not None:
+            q, qd = read_configurations(args.configurations, robot, dtype)
+            qd_from_file = qd is not None
+            if qd is None:
+                _, qd = sample_configurations(robot, len(q), args.seed, args.qd_scale, dtype)
+        else:
+            q, qd = sample_configurations(
+                robot, args.n or DEFAULT_N, args.seed, args.qd_scale, dtype
+            )
+            qd_from_file = False
+        fmt = args.format
+        if fmt is None:
+            suffix = pathlib.Path(args.output or "").suffix.lower().lstrip(".")
+            fmt = suffix if suffix in OUTPUT_FORMATS else "npz"
+        source = (args.configurations, qd_from_file)
         if args.no_output:
-            return _velocities(args, robot, frame_name, None)
-        path = args.output or f"velocities_{args.robot}_{args.n}.npz"
+            return _velocities(args, robot, frame_name, q, qd, source, None, fmt)
+        path = args.output or f"velocities_{label}_{len(q)}.{fmt}"
         with AtomicOutput(path) as output:
-            return _velocities(args, robot, frame_name, output)
+            return _velocities(args, robot, frame_name, q, qd, source, output, fmt)
+
+
+def read_configurations(path: str, robot: jk.Robot, dtype: Any):
+    """``(q, qd)`` from a .npz (arrays ``q``, optional ``qd``) or CSV file; ``qd`` may be None.
+
+    Shapes (N, dof) in ``robot.joint_names`` order; see ``jaxkin velocities --help`` for the
+    CSV layout. Every problem with the file is a :class:`UsageError` naming it.
+    """
+    p = pathlib.Path(path)
+    if not p.is_file():
+        raise UsageError(
+            f"configurations file {path} " + ("is not a file" if p.exists() else "does not exist")
+        )
+    try:
+        if p.suffix.lower() == ".npz":
+            q, qd = _read_npz(p, robot)
+        else:
+            q, qd = _read_csv(p, robot)
+    except OSError as e:
+        raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
+    for name, a in (("q", q), ("qd", qd)):
+        if a is None:
+            continue
+        bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+        if bad.size:
+            raise UsageError(
+                f"{path}: {name} of configuration {int(bad[0])} is not finite: {a[bad[0]].tolist()}"
+            )
+    if len(q) == 0:
+        raise UsageError(f"{path} holds no configurations")
+    return q.astype(dtype), None if qd is None else qd.astype(dtype)
+
+
+def _joint_shape_error(path, what: str, got: tuple, robot: jk.Robot) -> UsageError:
+    return UsageError(
+        f"{path}: {what} has shape {got}; robot {robot.name!r} has {robot.dof} joints "
+        f"({', '.join(robot.joint_names)}), so it must be (N, {robot.dof})"
+    )
+
+
+def _read_npz(p: pathlib.Path, robot: jk.Robot):
+    import zipfile
+
+    if not zipfile.is_zipfile(p):
+        raise UsageError(f"{p} is not an .npz file (numpy.savez writes one); or use a .csv file")
+    try:
+        with np.load(p, allow_pickle=False) as f:
+            arrays = {k: f[k] for k in f.files}
+    except (ValueError, zipfile.BadZipFile, EOFError) as e:
+        raise UsageError(f"cannot read {p} as .npz: {e}") from None
+    if "q" not in arrays:
+        raise UsageError(
+            f"{p} has no array 'q' (it has {sorted(arrays) or 'none'}); save q of shape (N, dof)"
+        )
+    out = []
+    for name in ("q", "qd"):
+        a = arrays.get(name)
+        if a is None:
+            out.append(None)
+            continue
+        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+            raise UsageError(f"{p}: {name} must hold numbers, got dtype {a.dtype}")
+        a = a.astype(np.float64)
+        if a.ndim == 1:
+            a = a[None]
+        if a.ndim != 2 or a.shape[1] != robot.dof:
+            raise _joint_shape_error(p, name, arrays[name].shape, robot)
+        out.append(a)
+    if out[1] is not None and out[1].shape != out[0].shape:
+        raise UsageError(
+            f"{p}: qd has shape {out[1].shape} but q has {out[0].shape}; they must match"
+        )
+    return out[0], out[1]
+
+
+def _read_csv(p: pathlib.Path, robot: jk.Robot):
+    names = list(robot.joint_names)
+    header, rows = None, []
+    with open(p, encoding="utf-8", errors="replace") as f:
+        for lineno, line in enumerate(f, start=1):
+            text = line.strip()
+            if not text or text.startswith("#"):
+                continue
+            fields = [x.strip() for x in text.split(",")]
+            try:
+                rows.append((lineno, [float(x) for x in fields]))
+            except ValueError:
+                if header is None and not rows:
+                    header = fields
+                    continue
+                raise UsageError(
+                    f"{p} line {lineno}: not a row of numbers: {text[:80]!r}"
+                ) from None
+    if header is not None:
+        columns = {}
+        for k, h in enumerate(header):
+            key = h[2:] if h.startswith("q_") and h[2:] in names else h
+            if key in names:
+                columns[("q", key)] = k
+            elif h.startswith("qd_") and h[3:] in names:
+                columns[("qd", h[3:])] = k
+            else:
+                raise UsageError(
+                    f"{p}: unknown column {h!r}; columns are joint names {names} (or q_<joint>) "
+                    "and optionally qd_<joint>"
+                )
+        missing = [n for n in names if ("q", n) not in columns]
+        if missing:
+            raise UsageError(f"{p}: no column for joint(s) {missing} of robot {robot.name!r}")
+        has_qd = any(k[0] == "qd" for k in columns)
+        if has_qd and not all(("qd", n) in columns for n in names):
+            raise UsageError(f"{p}: give qd_<joint> for every joint {names} or for none")
+        order = [columns[("q", n)] for n in names]
+        if has_qd:
+            order += [columns[("qd", n)] for n in names]
+        width = len(header)
+    else:
+        order, width = None, None
+    table = []
+    for lineno, values in rows:
+        if width is not None and len(values) != width:
+            raise UsageError(f"{p} line {lineno}: {len(values)} values, the header has {width}")
+        if width is None and len(values) not in (robot.dof, 2 * robot.dof):
+            raise UsageError(
+                f"{p} line {lineno}: {len(values)} values; robot {robot.name!r} has {robot.dof} "
+                f"joints ({', '.join(names)}): give {robot.dof} (q) or {2 * robot.dof} (q, qd)"
+            )
+        table.append([values[k] for k in order] if order is not None else values)
+    if not table:
+        raise UsageError(f"{p} holds no configurations")
+    if width is None and len({len(r) for r in table}) > 1:
+        raise UsageError(f"{p}: rows mix {robot.dof} and {2 * robot.dof} values; use one layout")
+    a = np.array(table, dtype=np.float64)
+    if a.shape[1] == 2 * robot.dof:
+        return a[:, : robot.dof], a[:, robot.dof :]
+    return a, None
 
 
 def _velocities(
-    args: argparse.Namespace, robot: jk.Robot, frame_name: str, output: AtomicOutput | None
+    args: argparse.Namespace,
+    robot: jk.Robot,
+    frame_name: str,
+    q: np.ndarray,
+    qd: np.ndarray,
+    source: tuple[str | None, bool],
+    output: AtomicOutput | None,
+    fmt: str,
 ) -> int:
-    dtype = np.dtype(args.dtype)
-    q, qd = sample_configurations(robot, args.n, args.seed, args.qd_scale, dtype)
+    n = len(q)
     fn = velocity_kernel(robot, frame_name, args.reference, args.representation)
     if args.progress is None:
-        show = args.n >= PROGRESS_MIN_N
-        bar = ProgressBar(args.n, "velocities", unit="cfg", enabled=show)
+        show = n >= PROGRESS_MIN_N
+        bar = ProgressBar(n, "velocities", unit="cfg", enabled=show)
     else:
-        bar = ProgressBar(args.n, "velocities", unit="cfg", enabled=args.progress, force=True)
+        bar = ProgressBar(n, "velocities", unit="cfg", enabled=args.progress, force=True)
     res, stats = chunked_map(fn, q, qd, chunk_size=args.chunk_size, progress=bar, return_stats=True)
 
     tol = args.singular_tol
@@ -438,17 +822,15 @@ def _velocities(
             "singular_tol": np.array(tol),
             "jaxkin_version": np.array(jk.__version__),
         }
-        output.commit(arrays)
+        output.commit(arrays, fmt)
 
-    n = args.n
     pct = lambda k: 100.0 * k / n  # noqa: E731
     margin_name = {"rpy": "|cos(pitch)|", "zyz": "|sin(theta)|", "rotvec": "1 - |w|/(2 pi)"}
     lines = [
         f"robot            {robot.name} ({robot.dof} dof: {', '.join(robot.joint_names)})",
         f"frame            {frame_name}, reference {args.reference}, "
         f"representation {args.representation}",
-        f"configurations   {n:,} (seed {args.seed}, qd uniform in [-{args.qd_scale:g}, "
-        f"{args.qd_scale:g}] rad/s or m/s)",
+        f"configurations   {_source_line(args, robot, q, source)}",
         f"dtype            {args.dtype}",
         f"chunks           {stats.n_chunks} x {stats.chunk_size:,} "
         f"({stats.padding:,} padding rows)",
@@ -488,3 +870,195 @@ def _norm_line(label: str, vectors: np.ndarray) -> str:
         f"{label:<16} min {lo:.4g}  mean {norms.mean():.4g}  median {med:.4g}  "
         f"p99 {p99:.4g}  max {hi:.4g}"
     )
+
+
+def _source_line(args: argparse.Namespace, robot: jk.Robot, q: np.ndarray, source) -> str:
+    path, qd_from_file = source
+    sampled_qd = (
+        f"qd uniform in [-{args.qd_scale:g}, {args.qd_scale:g}] rad/s or m/s, seed {args.seed}"
+    )
+    if path is None:
+        return f"{len(q):,} (seed {args.seed}, {sampled_qd.replace(f', seed {args.seed}', '')})"
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    outside = int(np.count_nonzero(np.any((q < lo) | (q > hi), axis=1)))
+    qd_text = "qd from the file" if qd_from_file else sampled_qd
+    return f"{len(q):,} from {path} ({qd_text}; {outside:,} outside the joint limits)"
+
+
+def _write_csv(f, arrays: dict[str, np.ndarray]) -> None:
+    """One line per configuration: q_*, qd_*, the twist, sigma_*, margin; metadata as comments."""
+    joints = [str(j) for j in arrays["joint_names"]]
+    meta = [
+        "robot", "frame", "reference", "representation", "dtype", "seed", "qd_scale",
+        "singular_tol", "jaxkin_version",
+    ]  # fmt: skip
+    lines = [f"# jaxkin velocities: {k} = {arrays[k]}" for k in meta]
+    lines.append("# twist [vx vy vz wx wy wz] = J @ qd; J and Ja are written by --format npz only")
+    k = arrays["sigma"].shape[1]
+    header = (
+        [f"q_{j}" for j in joints]
+        + [f"qd_{j}" for j in joints]
+        + ["vx", "vy", "vz", "wx", "wy", "wz"]
+        + [f"sigma_{i + 1}" for i in range(k)]
+        + ["margin"]
+    )
+    table = np.concatenate(
+        [arrays["q"], arrays["qd"], arrays["twist"], arrays["sigma"], arrays["margin"][:, None]],
+        axis=1,
+    )
+    digits = 17 if table.dtype == np.float64 else 9
+    f.write(("\n".join(lines) + "\n" + ",".join(header) + "\n").encode())
+    np.savetxt(f, table, fmt=f"%.{digits}g", delimiter=",")
+
+
+# ---------------------------------------------------------------------- jacobian
+def cmd_jacobian(args: argparse.Namespace) -> int:
+    with _x64(args.dtype == "float64"):
+        robot, _ = load_robot(args.robot, args.dtype, args.tip, args.base)
+        q = _joint_values(args, robot)
+        frame = robot.frame_names[robot.frame_index(args.frame)]
+        if args.analytical:
+            J = jk.analytical_jacobian(robot, q, args.analytical, frame=frame, point=args.point)
+        else:
+            J = jk.geometric_jacobian(
+                robot, q, frame=frame, point=args.point, reference=args.reference
+            )
+        J = np.asarray(J, dtype=np.float64)
+    kind = "analytical" if args.analytical else "geometric"
+    if args.format == "json":
+        print(json.dumps(_jacobian_record(J, robot, frame, q, args, kind), indent=1))
+    elif args.format == "csv":
+        rows = _row_labels(args.analytical)
+        print(",".join(["row", *robot.joint_names]))
+        for label, row in zip(rows, J, strict=True):
+            print(",".join([label, *(repr(float(x)) for x in row)]))
+    else:
+        print(format_jacobian(J, robot, frame, q, args.reference, args.analytical, args.digits,
+                              args.point))  # fmt: skip
+        if not np.any(J):
+            print(
+                f"note: no joint moves frame {frame!r}; choose another with --frame (frames: "
+                f"{', '.join(robot.frame_names)}) or, for a URDF robot, --tip"
+            )
+    return 0
+
+
+def _joint_values(args: argparse.Namespace, robot: jk.Robot) -> np.ndarray:
+    if args.config is not None:
+        configs = robot.configurations
+        if args.config not in configs:
+            raise UsageError(
+                f"robot {robot.name!r} has no configuration {args.config!r}; it has "
+                f"{sorted(configs) or 'none'} (or give --q)"
+            )
+        return np.asarray(configs[args.config], dtype=np.float64)
+    if args.q is None:
+        return np.zeros(robot.dof)
+    texts = [t for item in args.q for t in item.replace(",", " ").split()]
+    values = []
+    for t in texts:
+        try:
+            values.append(float(t))
+        except ValueError:
+            raise UsageError(f"--q: {t!r} is not a number") from None
+    if len(values) != robot.dof:
+        raise UsageError(
+            f"robot {robot.name!r} has {robot.dof} joints ({', '.join(robot.joint_names)}); "
+            f"--q gave {len(values)} value{'s' if len(values) != 1 else ''}"
+        )
+    q = np.array(values)
+    if not np.all(np.isfinite(q)):
+        raise UsageError(f"--q must be finite numbers, got {values}")
+    return q
+
+
+def _row_labels(representation: str | None) -> list[str]:
+    if representation is None:
+        return ["vx", "vy", "vz", "wx", "wy", "wz"]
+    angles = {"rpy": ["roll", "pitch", "yaw"], "zyz": ["phi", "theta", "psi"]}
+    return ["x", "y", "z", *angles.get(representation, ["wx_rotvec", "wy_rotvec", "wz_rotvec"])]
+
+
+def _jacobian_header(robot, frame, q, reference, representation, point) -> list[str]:
+    at = "its origin" if point is None else f"the point {list(point)} m (frame axes) on it"
+    if representation is None:
+        meaning = {
+            "world_aligned": f"velocity of {at}, world axes",
+            "local": f"velocity of {at}, the frame's own axes",
+            "world": "velocity of the body point at the world origin, world axes",
+        }[reference]
+        what = (
+            f"geometric Jacobian, reference {reference}: [v; omega] = J @ qd, v = {meaning}, "
+            "omega in the same axes"
+        )
+    else:
+        what = {
+            "rpy": "analytical Jacobian d[p; phi]/dq, phi = (roll, pitch, yaw) of "
+            "R = Rz(yaw) Ry(pitch) Rx(roll)",
+            "zyz": "analytical Jacobian d[p; phi]/dq, phi = (phi, theta, psi) of "
+            "R = Rz(phi) Ry(theta) Rz(psi)",
+            "rotvec": "analytical Jacobian d[p; w]/dq, w the rotation vector (R = exp(skew(w)))",
+        }[representation] + f"; p = {at}, world axes"
+    tip = " (the tip)" if robot.frame_index(frame) == robot.tip_frame else ""
+    units = ["rad" if k == "revolute" else "m" for k in robot.joint_kinds]
+    q_text = ", ".join(
+        f"{n}={v:g} {u}" for n, v, u in zip(robot.joint_names, q, units, strict=True)
+    )
+    return [
+        f"robot  {robot.name} ({robot.dof} joints), frame {frame}{tip}",
+        f"q      {q_text}",
+        f"J      {what}",
+    ]
+
+
+def format_jacobian(
+    J: np.ndarray,
+    robot: jk.Robot,
+    frame: str,
+    q: np.ndarray,
+    reference: str = "world_aligned",
+    representation: str | None = None,
+    digits: int = 4,
+    point: Any = None,
+) -> str:
+    """A (6, dof) Jacobian as a labelled text table, with what it means stated above it."""
+    rows = _row_labels(representation)
+    linear = "m/s" if representation is None else "m"
+    angular = "rad/s" if representation is None else "rad"
+    units = [linear] * 3 + [angular] * 3
+    labels = [f"{r} [{u}]" for r, u in zip(rows, units, strict=True)]
+    cells = [[_number(x, digits) for x in row] for row in J]
+    width = max(max(len(n) for n in robot.joint_names), max(len(c) for r in cells for c in r))
+    lw = max(len(s) for s in labels)
+    lines = _jacobian_header(robot, frame, q, reference, representation, point)
+    if representation is None:
+        per = "per unit joint rate: a column is per rad/s (revolute joint) or per m/s (prismatic)"
+    else:
+        per = "derivatives: a column is per rad (revolute joint) or per m (prismatic)"
+    lines.append(f"rows   {' '.join(rows)} ({per})")
+    lines.append("")
+    lines.append(" " * lw + "  " + " ".join(f"{n:>{width}}" for n in robot.joint_names))
+    for label, row in zip(labels, cells, strict=True):
+        lines.append(f"{label:<{lw}}  " + " ".join(f"{c:>{width}}" for c in row))
+    return "\n".join(lines)
+
+
+def _number(x: float, digits: int) -> str:
+    text = f"{x:.{digits}f}"
+    return text.replace("-", "", 1) if float(text) == 0 else text  # no "-0.0000"
+
+
+def _jacobian_record(J, robot, frame, q, args, kind) -> dict[str, Any]:
+    return {
+        "robot": robot.name,
+        "frame": frame,
+        "kind": kind,
+        "reference": None if args.analytical else args.reference,
+        "representation": args.analytical,
+        "point": args.point,
+        "rows": _row_labels(args.analytical),
+        "columns": list(robot.joint_names),
+        "q": [float(x) for x in q],
+        "J": [[float(x) for x in row] for row in J],
+        "jaxkin_version": jk.__version__,
+    }

@@ -1,14 +1,34 @@
 """Tools for property-based tests of kinematics: hypothesis strategies and invariant checks.
 
-Requires ``hypothesis`` (``pip install jaxkin[test]``). Use in your own tests::
+Requires ``hypothesis`` (``pip install jaxkin[test]``). Strategies:
 
+* robots: :func:`dh_robots` (random standard/modified DH chains of a given size or joint mix,
+  ``kinds="RRPRRR"``), :func:`tree_robots` (URDF-style trees), :func:`robots_and_configurations`;
+* configurations: :func:`configurations` (within the limits), :func:`near_singular_configurations`
+  (where the Jacobian loses rank);
+* geometry: :func:`rotations`, :func:`unit_vectors`, :func:`transforms`.
+
+Checks: :func:`assert_jacobian_consistent` (hand-built Jacobian == ``jax.jacfwd`` == ``jax.jacrev``
+== finite differences) and the oracle :func:`finite_difference_jacobian`.
+
+Use them in your own tests (float64: ``jax.config.update("jax_enable_x64", True)`` first)::
+
+    import jax.numpy as jnp
     from hypothesis import given
+    import jaxkin as jk
     import jaxkin.testing as jkt
 
     @given(jkt.robots_and_configurations(max_joints=7))
-    def test_my_property(robot_and_q):
+    def test_jacobians_agree(robot_and_q):
         robot, q = robot_and_q
         jkt.assert_jacobian_consistent(robot, q)
+
+    MY_ROBOT = jk.robots.load("niryo_one")  # or jk.load_urdf("my_robot.urdf")
+
+    @given(jkt.near_singular_configurations(MY_ROBOT))
+    def test_my_controller_survives_singularities(q):
+        qd = my_controller(MY_ROBOT, q)          # your code
+        assert jnp.all(jnp.isfinite(qd))
 
 The finite-difference oracle :func:`finite_difference_jacobian` works on SE(3) and needs float64
 (``jax.config.update("jax_enable_x64", True)``); do not finite-difference in float32.
@@ -16,6 +36,7 @@ The finite-difference oracle :func:`finite_difference_jacobian` works on SE(3) a
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -41,6 +62,7 @@ __all__ = [
     "dh_robots",
     "dh_rows",
     "finite_difference_jacobian",
+    "near_singular_configurations",
     "robots_and_configurations",
     "rotations",
     "transforms",
@@ -94,13 +116,38 @@ def transforms(scale: float = 1.0) -> st.SearchStrategy[np.ndarray]:
     return st.builds(make, rotations(), st.tuples(*[_length(scale)] * 3).map(np.array))
 
 
+def _check_kinds(kinds: str | None) -> str | None:
+    if kinds is not None and (not isinstance(kinds, str) or not kinds or set(kinds) - {"R", "P"}):
+        raise ValueError(f"kinds must be a non-empty string of 'R' and 'P', got {kinds!r}.")
+    return kinds
+
+
+def dh_rows(
+    min_joints: int = 1,
+    max_joints: int = 12,
+    prismatic: bool = True,
+    kinds: str | None = None,
+) -> st.SearchStrategy[list[dict]]:
+    """A DH table (list of row dicts) with mixed revolute/prismatic joints and finite limits.
+
+    ``kinds`` (e.g. ``"RRPRRR"``) fixes the number and kind of the joints (R revolute, P
+    prismatic) and overrides ``min_joints``, ``max_joints`` and ``prismatic``.
+    """
+    return _dh_rows(min_joints, max_joints, prismatic, _check_kinds(kinds))
+
+
 @st.composite
-def dh_rows(draw, min_joints: int = 1, max_joints: int = 12, prismatic: bool = True):
-    """A DH table (list of row dicts) with mixed revolute/prismatic joints and finite limits."""
-    n = draw(st.integers(min_joints, max_joints))
+def _dh_rows(draw, min_joints, max_joints, prismatic, kinds):
+    if kinds is not None:
+        names = ["revolute" if k == "R" else "prismatic" for k in kinds]
+    else:
+        n = draw(st.integers(min_joints, max_joints))
+        names = [
+            draw(st.sampled_from(["revolute", "prismatic"])) if prismatic else "revolute"
+            for _ in range(n)
+        ]
     rows = []
-    for _ in range(n):
-        kind = draw(st.sampled_from(["revolute", "prismatic"])) if prismatic else "revolute"
+    for kind in names:
         row = dict(
             a=draw(_length()),
             alpha=draw(_angle()),
@@ -117,17 +164,28 @@ def dh_rows(draw, min_joints: int = 1, max_joints: int = 12, prismatic: bool = T
     return rows
 
 
-@st.composite
 def dh_robots(
-    draw,
     min_joints: int = 1,
     max_joints: int = 12,
     convention: str | None = None,
     prismatic: bool = True,
     dtype: Any = None,
-):
-    """Random DH robots (standard or modified, random base and tool transforms)."""
-    rows = draw(dh_rows(min_joints, max_joints, prismatic))
+    kinds: str | None = None,
+) -> st.SearchStrategy[Robot]:
+    """Random DH robots (standard or modified, random base and tool transforms).
+
+    Size: ``min_joints`` to ``max_joints`` joints; joint mix: ``prismatic=False`` for revolute
+    joints only, or ``kinds="RRPRRR"`` for exactly that sequence.
+    """
+    if convention not in (None, "standard", "modified"):
+        raise ValueError(f"convention must be None, 'standard' or 'modified', got {convention!r}.")
+    rows = dh_rows(min_joints, max_joints, prismatic, kinds)
+    return _dh_robots(rows, convention, dtype)
+
+
+@st.composite
+def _dh_robots(draw, rows, convention, dtype):
+    rows = draw(rows)
     conv = convention or draw(st.sampled_from(["standard", "modified"]))
     base = draw(st.one_of(st.none(), transforms()))
     tool = draw(st.one_of(st.none(), transforms(0.3)))
@@ -177,6 +235,106 @@ def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.nd
         a, b = a + margin * (b - a), b - margin * (b - a)
         elems.append(st.floats(a, b, **_FINITE))
     return st.tuples(*elems).map(lambda t: np.array(t, dtype=float))
+
+
+_ROWS = {"all": slice(0, 6), "translation": slice(0, 3), "rotation": slice(3, 6)}
+
+
+@functools.partial(jax.jit, static_argnames=("frame", "rows", "rank"))
+def _smallest_singular_value_and_grad(robot: Robot, q, frame, rows: str, rank: int):
+    """``(sigma_rank, sigma_1)`` of the world-aligned J's ``rows`` at ``q``, and the gradient of
+    sigma_rank."""
+
+    def sigmas(qq):
+        J = geometric_jacobian(robot, qq, frame=frame)[_ROWS[rows]]
+        s = jnp.linalg.svd(J, compute_uv=False)
+        return s[rank - 1], s[0]
+
+    (s_r, s_1), grad = jax.value_and_grad(sigmas, has_aux=True)(q)
+    return s_r, s_1, grad
+
+
+def _generic_rank(robot: Robot, frame, rows: str, lo: np.ndarray, hi: np.ndarray, dtype) -> int:
+    """The Jacobian's largest rank, from a few fixed random configurations within the limits."""
+    rng = np.random.default_rng(0)
+    rank = 0
+    for _ in range(4):
+        q = jnp.asarray(lo + (hi - lo) * rng.random(robot.dof), dtype=dtype)
+        J = np.asarray(geometric_jacobian(robot, q, frame=frame))[_ROWS[rows]]
+        s = np.linalg.svd(J, compute_uv=False)
+        rank = max(rank, int(np.count_nonzero(s > 1e-9 * max(float(s[0]), 1e-300))))
+    return rank
+
+
+def near_singular_configurations(
+    robot: Robot,
+    frame: int | str | None = None,
+    *,
+    rows: str = "all",
+    tol: float = 1e-6,
+    max_steps: int = 40,
+) -> st.SearchStrategy[np.ndarray]:
+    """Configurations (dof,) within the limits where ``frame``'s Jacobian is (nearly) singular.
+
+    ``J`` is the world-aligned geometric Jacobian's ``rows``: ``"all"`` (6 x dof),
+    ``"translation"`` (``J_v``, the frame origin's velocity: e.g. the planar two-link arm, whose
+    full J never loses rank, is singular in ``J_v`` at ``q2 = 0, pi``) or ``"rotation"``.
+    Each example starts from a configuration drawn within the limits and takes Newton steps on
+    ``sigma_r(J(q))``, the r-th singular value, r being the largest rank J reaches
+    (``min(rows, dof)`` unless the robot is degenerate), projecting onto the limits after each
+    step. It yields ``q`` once ``sigma_r / sigma_1 <= tol`` and rejects the
+    start (``hypothesis.reject``) if that takes more than ``max_steps`` steps. So every example
+    is a configuration where J has lost rank to within ``tol``: at or next to a singularity.
+
+    Which singularity each example lands on depends on its start: all kinds that lie within the
+    limits come up (e.g. for the Niryo One: wrist, ``q5 = 0``; shoulder, wrist centre on the base
+    axis). A robot that has no singular configuration within its limits (a single revolute joint)
+    makes hypothesis report the strategy as unsatisfiable. Compiles one Newton step per robot
+    topology (a second or two); float64 (x64) reaches ``tol = 1e-6`` reliably, float32 about
+    ``1e-4``.
+    """
+    if not (isinstance(tol, (int, float)) and 0 < tol < 1):
+        raise ValueError(f"tol must be a number in (0, 1), got {tol!r}.")
+    if rows not in _ROWS:
+        raise ValueError(f"rows must be one of {tuple(_ROWS)}, got {rows!r}.")
+    robot.frame_index(frame)  # validates frame now, not inside hypothesis
+    dtype = jnp.result_type(float)
+    lo, hi = _finite_limits(robot)
+    rank = _generic_rank(robot, frame, rows, lo, hi, dtype)
+    if rank == 0:
+        raise ValueError(f"no joint moves frame {frame!r} of robot {robot.name!r}.")
+
+    def newton(q0: np.ndarray) -> np.ndarray:
+        q = np.clip(q0, lo, hi)
+        for _ in range(max_steps):
+            s_r, s_1, g = _smallest_singular_value_and_grad(
+                robot, jnp.asarray(q, dtype=dtype), frame, rows, rank
+            )
+            s_r, s_1, g = float(s_r), float(s_1), np.asarray(g, dtype=float)
+            if s_r <= tol * s_1:
+                return q
+            g2 = float(g @ g)
+            if not (np.isfinite(g2) and g2 > 0):
+                break
+            step = -s_r * g / g2  # Newton on the (locally linear) distance sigma_r
+            norm = float(np.linalg.norm(step))
+            if norm > 0.5:
+                step *= 0.5 / norm  # damped: stay in the region where the model holds
+            q = np.clip(q + step, lo, hi)
+        return None
+
+    return configurations(robot).map(newton).filter(lambda q: q is not None)
+
+
+def _finite_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits with unbounded sides replaced as in :func:`configurations`."""
+    lo = np.asarray(robot.lower, dtype=float).copy()
+    hi = np.asarray(robot.upper, dtype=float).copy()
+    for i, kind in enumerate(robot.joint_kinds):
+        default = math.pi if kind == "revolute" else 1.0
+        lo[i] = lo[i] if np.isfinite(lo[i]) else -default
+        hi[i] = hi[i] if np.isfinite(hi[i]) else default
+    return lo, hi
 
 
 def robots_and_configurations(

@@ -158,19 +158,37 @@ def test_check_failure_exits_1(capsys, monkeypatch, in_tmp):
 
 
 def test_robots_and_help(capsys):
-    code, out, _ = run(capsys, "robots")
+    code, out, _ = run(capsys, "robots", "--zoo")
     assert code == 0
     assert [line.split()[0] for line in out.splitlines()] == jk.robots.names()
+    code, out, _ = run(capsys, "robots")
+    assert code == 0
+    zoo, _, rest = out.partition("\n\n")
+    assert [line.split()[0] for line in zoo.splitlines()] == jk.robots.names()
+    erd = jk.robots.erd_names() if hasattr(jk.robots, "erd_names") else []
+    assert [line for line in rest.splitlines() if not line.startswith("#")] == erd
+    assert "URDF file" in rest
     code, out, _ = run(capsys, "velocities", "--help")
     assert code == 0 and "--singular-tol" in out and "sigma_min / sigma_max" in out
     assert "-pi/pi rad" in out and "-1/1 m" in out
+    flat = " ".join(out.split())  # argparse wraps help lines
+    for word in ("--configurations", "qd_<joint>", "--format csv", "URDF file path", "--tip"):
+        assert word in flat, word
+    code, out, _ = run(capsys, "jacobian", "--help")
+    assert code == 0
+    flat = " ".join(out.split())
+    for word in ("--q", "--config", "--reference", "world_aligned", "[v; omega]", "--analytical",
+                 "Rz(yaw) Ry(pitch) Rx(roll)", "per rad/s", "examples:"):  # fmt: skip
+        assert word in flat, word
     code, out, _ = run(capsys, "--help")
-    assert code == 0 and "velocities" in out and "robots" in out
+    assert code == 0 and "velocities" in out and "robots" in out and "jacobian" in out
 
 
 # ---------------------------------------------------------------------- usage errors
 def test_unknown_robot(capsys):
     assert_usage_error(capsys, "velocities", "nosuchbot", match="unknown robot 'nosuchbot'")
+    assert_usage_error(capsys, "jacobian", "nosuchbot", match="unknown robot 'nosuchbot'")
+    assert_usage_error(capsys, "velocities", "missing.urdf", "--n", "3", match="missing.urdf")
 
 
 @pytest.mark.parametrize("bad", ["0", "-5", "abc", "1.5", "1e-3", "inf", ""])
@@ -264,3 +282,265 @@ def test_python_dash_m(in_tmp):
     assert proc.returncode == 0, proc.stderr
     assert "PASS" in proc.stdout and "niryo_one" in proc.stdout
     assert os.listdir(in_tmp) == []
+
+
+# ---------------------------------------------------------------------- jaxkin jacobian
+NIRYO_Q = ["0.2", "-0.5", "0.3", "0.1", "-0.4", "0.6"]
+
+
+def parse_csv_jacobian(out):
+    lines = out.strip().splitlines()
+    header = lines[0].split(",")
+    rows = [line.split(",") for line in lines[1:]]
+    return header, [r[0] for r in rows], np.array([[float(x) for x in r[1:]] for r in rows])
+
+
+@pytest.mark.parametrize("reference", ["world_aligned", "local", "world"])
+def test_jacobian_csv_is_the_library_jacobian(capsys, reference):
+    code, out, _ = run(capsys, "jacobian", "niryo_one", "--q", *NIRYO_Q, "--reference", reference,
+                       "--format", "csv")  # fmt: skip
+    assert code == 0
+    header, rows, J = parse_csv_jacobian(out)
+    robot = jk.robots.load("niryo_one", dtype="float64")
+    assert header == ["row", *robot.joint_names]
+    assert rows == ["vx", "vy", "vz", "wx", "wy", "wz"]
+    q = np.array([float(x) for x in NIRYO_Q])
+    expected = np.asarray(jk.geometric_jacobian(robot, q, reference=reference))
+    np.testing.assert_array_equal(J, expected)  # repr() round-trips float64 exactly
+
+
+def test_jacobian_text_states_frame_reference_rows_and_units(capsys):
+    code, out, _ = run(capsys, "jacobian", "niryo_one", "--q", "0.2,-0.5,0.3", "0.1", "-0.4,0.6")
+    assert code == 0
+    for words in (
+        "frame gripper_link (the tip)",
+        "reference world_aligned",
+        "[v; omega] = J @ qd",
+        "world axes",
+        "rows   vx vy vz wx wy wz",
+        "joint_1=0.2 rad",
+        "per rad/s",
+    ):
+        assert words in out, words
+    table = [line.split() for line in out.splitlines() if line.startswith(("v", "w"))]
+    labels = [" ".join(t[:2]) for t in table]
+    assert labels == ["vx [m/s]", "vy [m/s]", "vz [m/s]", "wx [rad/s]", "wy [rad/s]", "wz [rad/s]"]
+    robot = jk.robots.load("niryo_one", dtype="float64")
+    J = np.asarray(jk.geometric_jacobian(robot, np.array([float(x) for x in NIRYO_Q])))
+    np.testing.assert_allclose([[float(x) for x in t[2:]] for t in table], J, atol=5e-5)
+    assert "-0.0000" not in out
+
+
+def test_jacobian_named_configuration_point_frame_analytical_json(capsys):
+    import json
+
+    robot = jk.robots.load("puma560", dtype="float64")
+    q = robot.configurations["qn"]
+    code, out, _ = run(capsys, "jacobian", "puma560", "--config", "qn", "--frame", "link5",
+                       "--point", "0", "0", "0.1", "--format", "json")  # fmt: skip
+    assert code == 0
+    d = json.loads(out)
+    assert (d["frame"], d["kind"], d["reference"], d["point"]) == (
+        "link5",
+        "geometric",
+        "world_aligned",
+        [0, 0, 0.1],
+    )
+    expected = jk.geometric_jacobian(robot, q, frame="link5", point=[0, 0, 0.1])
+    np.testing.assert_array_equal(np.array(d["J"]), np.asarray(expected))
+    assert d["columns"] == list(robot.joint_names) and d["q"] == q.tolist()
+    code, out, _ = run(capsys, "jacobian", "cylindrical", "--q", "0.3", "0.4", "0.5",
+                       "--analytical", "rpy")  # fmt: skip
+    assert code == 0 and "rows   x y z roll pitch yaw" in out and "d[p; phi]/dq" in out
+    code, out, _ = run(capsys, "jacobian", "two_link_planar")  # default: q = 0
+    assert code == 0 and "joint1=0 rad, joint2=0 rad" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["niryo_one", "--q", "1", "2"], "has 6 joints (joint_1, joint_2"),
+        (["niryo_one", "--q", "1", "2", "x", "4", "5", "6"], "'x' is not a number"),
+        (["niryo_one", "--q", "1", "2", "3", "4", "5", "nan"], "finite"),
+        (["niryo_one", "--config", "nosuch"], "no configuration 'nosuch'"),
+        (["niryo_one", "--q", "0", "--config", "zero"], "not allowed with"),
+        (["niryo_one", "--frame", "nosuch"], "no frame 'nosuch'"),
+        (["niryo_one", "--tip", "hand_link"], "--tip and --base apply to URDF robots"),
+        (
+            ["niryo_one", "--q", "0", "0", "0", "0", str(np.pi / 2), "0", "--analytical", "rpy"],
+            "representation is singular",
+        ),
+        (["niryo_one", "--reference", "global"], "argument --reference"),
+        (["nosuch.urdf"], "no such URDF file: nosuch.urdf"),
+    ],
+)
+def test_jacobian_usage_errors(capsys, argv, match):
+    assert_usage_error(capsys, "jacobian", *argv, match=match)
+
+
+def test_jacobian_notes_a_frame_no_joint_moves(capsys):
+    code, out, _ = run(capsys, "jacobian", "niryo_one", "--frame", "base_link")
+    assert code == 0 and "note: no joint moves frame 'base_link'" in out
+
+
+# ---------------------------------------------------------------------- configuration files
+def twist_of(robot, q, qd):
+    return np.asarray(jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(q, qd))
+
+
+def test_velocities_configurations_csv_with_header_and_qd(capsys, in_tmp):
+    robot = jk.robots.load("two_link_planar", dtype="float64")
+    (in_tmp / "c.csv").write_text(
+        "# two configurations\nqd_joint2,joint2,q_joint1,qd_joint1\n0.5,0.2,0.1,-1\n\n"
+        "0,-3.5,3.0,2\n"
+    )
+    code, out, _ = run(capsys, "velocities", "two_link_planar", "--configurations", "c.csv",
+                       "--output", "v.npz")  # fmt: skip
+    assert code == 0 and "2 from c.csv (qd from the file; 1 outside the joint limits)" in out
+    d = load(in_tmp / "v.npz")
+    np.testing.assert_array_equal(d["q"], [[0.1, 0.2], [3.0, -3.5]])
+    np.testing.assert_array_equal(d["qd"], [[-1.0, 0.5], [2.0, 0.0]])
+    np.testing.assert_allclose(d["twist"], twist_of(robot, d["q"], d["qd"]), atol=1e-15)
+
+
+def test_velocities_configurations_plain_csv_and_npz(capsys, in_tmp):
+    robot = jk.robots.load("niryo_one", dtype="float64")
+    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, size=(7, 6))
+    np.savetxt(in_tmp / "q.csv", q, delimiter=",")  # no header, q only: qd is sampled
+    code, out, _ = run(capsys, "velocities", "--configurations", "q.csv", "--seed", "4",
+                       "--output", "a.npz")  # fmt: skip
+    assert code == 0 and "7 from q.csv (qd uniform in [-1, 1]" in out and "seed 4" in out
+    a = load(in_tmp / "a.npz")
+    np.testing.assert_array_equal(a["q"], q)
+    _, qd_expected = cli.sample_configurations(robot, 7, 4, 1.0, np.float64)
+    np.testing.assert_array_equal(a["qd"], qd_expected)
+    qd = -q
+    np.savez(in_tmp / "qqd.npz", q=q, qd=qd)
+    code, _, _ = run(capsys, "velocities", "--configurations", "qqd.npz", "--output", "b.npz")
+    assert code == 0
+    b = load(in_tmp / "b.npz")
+    np.testing.assert_array_equal(b["qd"], qd)
+    np.testing.assert_allclose(b["twist"], twist_of(robot, q, qd), atol=1e-15)
+    np.savez(in_tmp / "one.npz", q=q[0])  # a single configuration (dof,)
+    code, out, _ = run(capsys, "velocities", "--configurations", "one.npz", "--no-output")
+    assert code == 0 and "1 from one.npz" in out
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        ("a.csv", "0.1,0.2,0.3\n", "line 1: 3 values; robot 'two_link_planar' has 2 joints"),
+        ("b.csv", "0.1,0.2\n0.1,0.2,0.3,0.4\n", "rows mix 2 and 4 values"),
+        ("c.csv", "joint1,elbow\n0,0\n", "unknown column 'elbow'"),
+        ("d.csv", "joint1\n0\n", "no column for joint(s) ['joint2']"),
+        ("e.csv", "joint1,joint2,qd_joint1\n0,0,1\n", "qd_<joint> for every joint"),
+        ("f.csv", "0.1,0.2\n0.1,abc\n", "line 2: not a row of numbers"),
+        ("g.csv", "0.1,inf\n", "q of configuration 0 is not finite"),
+        ("h.csv", "# only a comment\n", "holds no configurations"),
+        ("i.csv", "joint1,joint2\n1,2,3\n", "line 2: 3 values, the header has 2"),
+        ("j.npz", "not a zip", "is not an .npz file"),
+    ],
+)
+def test_bad_configuration_files(capsys, in_tmp, name, content, match):
+    (in_tmp / name).write_text(content)
+    assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations", name,
+                       "--no-output", match=match)  # fmt: skip
+
+
+def test_bad_configuration_npz_arrays(capsys, in_tmp):
+    cases = [
+        ({"x": np.zeros(2)}, "has no array 'q' (it has ['x'])"),
+        ({"q": np.zeros((3, 5))}, "q has shape (3, 5); robot 'two_link_planar' has 2 joints"),
+        ({"q": np.zeros((3, 2)), "qd": np.zeros((2, 2))}, "qd has shape (2, 2) but q has (3, 2)"),
+        ({"q": np.array([["a", "b"]])}, "q must hold numbers"),
+    ]
+    for k, (arrays, match) in enumerate(cases):
+        np.savez(in_tmp / f"{k}.npz", **arrays)
+        assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations",
+                           f"{k}.npz", "--no-output", match=match)  # fmt: skip
+    assert_usage_error(capsys, "velocities", "--configurations", "none.csv", match="does not exist")
+    os.mkdir(in_tmp / "d.csv")
+    assert_usage_error(capsys, "velocities", "--configurations", "d.csv", match="is not a file")
+    assert_usage_error(capsys, "velocities", "--configurations", "x.csv", "--n", "5",
+                       match="not allowed with argument")  # fmt: skip
+
+
+def test_velocities_csv_output_matches_npz(capsys, in_tmp):
+    argv = ["velocities", "two_link_planar", "--n", "40", "--seed", "2"]
+    assert run(capsys, *argv, "--output", "v.npz")[0] == 0
+    code, out, _ = run(capsys, *argv, "--format", "csv")
+    assert code == 0 and "velocities_two_link_planar_40.csv" in out
+    assert run(capsys, *argv, "--output", "w.csv")[0] == 0  # format from the suffix
+    d = load(in_tmp / "v.npz")
+    for name in ("velocities_two_link_planar_40.csv", "w.csv"):
+        text = (in_tmp / name).read_text()
+        assert "# jaxkin velocities: robot = two_link_planar" in text
+        lines = [line for line in text.splitlines() if not line.startswith("#")]
+        header = lines[0].split(",")
+        assert header == ["q_joint1", "q_joint2", "qd_joint1", "qd_joint2", "vx", "vy", "vz",
+                          "wx", "wy", "wz", "sigma_1", "sigma_2", "margin"]  # fmt: skip
+        table = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
+        expected = np.concatenate(
+            [d["q"], d["qd"], d["twist"], d["sigma"], d["margin"][:, None]], axis=1
+        )
+        np.testing.assert_array_equal(table, expected)  # %.17g round-trips float64
+
+
+# ---------------------------------------------------------------------- URDF robots
+TINY_URDF = """<?xml version="1.0"?>
+<robot name="tiny_arm">
+  <link name="base"/><link name="upper"/><link name="fore"/><link name="hand"/>
+  <joint name="shoulder" type="revolute">
+    <parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <joint name="elbow" type="revolute">
+    <parent link="upper"/><child link="fore"/>
+    <origin xyz="0.3 0 0" rpy="0.2 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/>
+  </joint>
+  <joint name="slide" type="prismatic">
+    <parent link="fore"/><child link="hand"/>
+    <origin xyz="0.2 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.1" effort="1" velocity="1"/>
+  </joint>
+</robot>
+"""
+
+needs_urdf = pytest.mark.skipif(not hasattr(jk, "load_urdf"), reason="jk.load_urdf not available")
+
+
+@needs_urdf
+def test_urdf_file_jacobian_and_velocities(capsys, in_tmp):
+    (in_tmp / "arm.urdf").write_text(TINY_URDF)
+    robot = jk.load_urdf(in_tmp / "arm.urdf", dtype="float64")
+    code, out, _ = run(capsys, "jacobian", "arm.urdf", "--q", "0.1", "0.2", "0.05", "--format",
+                       "csv")  # fmt: skip
+    assert code == 0
+    header, _, J = parse_csv_jacobian(out)
+    assert header == ["row", "shoulder", "elbow", "slide"]
+    q = np.array([0.1, 0.2, 0.05])
+    np.testing.assert_array_equal(J, np.asarray(jk.geometric_jacobian(robot, q)))
+    code, out, _ = run(capsys, "velocities", str(in_tmp / "arm.urdf"), "--n", "30")
+    assert code == 0 and "tiny_arm (3 dof: shoulder, elbow, slide)" in out and "PASS" in out
+    d = load(in_tmp / "velocities_arm_30.npz")
+    np.testing.assert_allclose(d["twist"], twist_of(robot, d["q"], d["qd"]), atol=1e-15)
+    code, out, _ = run(capsys, "jacobian", "arm.urdf", "--tip", "fore", "--q", "0", "0")
+    assert code == 0 and "frame fore (the tip)" in out
+
+
+@needs_urdf
+def test_bad_urdf_files_are_one_line_errors(capsys, in_tmp):
+    (in_tmp / "broken.urdf").write_text("<robot")
+    assert_usage_error(capsys, "jacobian", "broken.urdf", match="broken.urdf")
+    (in_tmp / "arm.urdf").write_text(TINY_URDF)
+    assert_usage_error(capsys, "jacobian", "arm.urdf", "--tip", "nolink", match="nolink")
+    os.mkdir(in_tmp / "dir.urdf")
+    assert_usage_error(capsys, "velocities", "dir.urdf", "--n", "3", match="is not a file")
+
+
+def test_urdf_path_without_load_urdf_is_a_clear_error(capsys, in_tmp, monkeypatch):
+    (in_tmp / "arm.urdf").write_text(TINY_URDF)
+    monkeypatch.delattr(jk, "load_urdf", raising=False)
+    assert_usage_error(capsys, "jacobian", "arm.urdf", match="has no URDF support")
