@@ -8,14 +8,47 @@ Conventions: ``T_a_b`` is the pose of b in a; twists and Jacobian rows are ``[v;
 ``R = Rz(yaw) Ry(pitch) Rx(roll)`` ordered (roll, pitch, yaw).
 """
 
+from . import analysis as analysis
+from . import calibration as calibration
+from . import derivatives as derivatives
+from . import ik as ik
+from . import inverse_velocity as inverse_velocity
 from . import robots as robots
 from . import spatial as spatial
+from .analysis import condition_number as condition_number
+from .analysis import dependent_columns as dependent_columns
+from .analysis import force_ellipsoid as force_ellipsoid
+from .analysis import joint_torques as joint_torques
+from .analysis import manipulability as manipulability
+from .analysis import manipulability_gradient as manipulability_gradient
+from .analysis import near_singular as near_singular
+from .analysis import singular_values as singular_values
+from .analysis import velocity_ellipsoid as velocity_ellipsoid
+from .analysis import wrist_centre as wrist_centre
+from .analysis import wrist_decoupling as wrist_decoupling
+from .calibration import calibrate as calibrate
+from .calibration import identifiability as identifiability
+from .derivatives import analytical_jacobian_dot as analytical_jacobian_dot
+from .derivatives import analytical_jacobian_dot_qd as analytical_jacobian_dot_qd
+from .derivatives import jacobian_dot as jacobian_dot
+from .derivatives import jacobian_dot_qd as jacobian_dot_qd
+from .derivatives import kinematic_hessian as kinematic_hessian
 from .errors import JaxkinError as JaxkinError
 from .errors import JaxkinPrecisionWarning as JaxkinPrecisionWarning
 from .errors import ModelError as ModelError
 from .errors import RepresentationSingularityError as RepresentationSingularityError
 from .errors import ShapeError as ShapeError
 from .errors import UnknownRobotError as UnknownRobotError
+from .ik import IKError as IKError
+from .ik import IKSolution as IKSolution
+from .ik import solve_ik as solve_ik
+from .inverse_velocity import adaptive_damping as adaptive_damping
+from .inverse_velocity import damped_least_squares as damped_least_squares
+from .inverse_velocity import null_space_projector as null_space_projector
+from .inverse_velocity import null_space_velocity as null_space_velocity
+from .inverse_velocity import pinv_velocity as pinv_velocity
+from .inverse_velocity import pose_error as pose_error
+from .inverse_velocity import resolved_rate_control as resolved_rate_control
 from .jacobians import analytical_jacobian as analytical_jacobian
 from .jacobians import change_reference as change_reference
 from .jacobians import geometric_jacobian as geometric_jacobian

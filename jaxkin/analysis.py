@@ -1,0 +1,556 @@
+"""Singularities, manipulability, ellipsoids and statics of a Jacobian.
+
+Most functions take a Jacobian ``J`` of shape (m, dof) (typically the (6, dof) geometric Jacobian
+of :func:`jaxkin.geometric_jacobian`, rows ``[v; omega]``) and work on one Jacobian; batch with
+``jax.vmap``. ``rows`` selects the task-space rows analysed:
+
+============== ==========================================================================
+``rows``       rows of a (6, dof) Jacobian
+============== ==========================================================================
+``"all"``      all rows (any m); mixes metres and radians, so its values depend on units
+``"translation"`` rows 0..2 (linear velocity)
+``"rotation"`` rows 3..5 (angular velocity)
+a sequence     those row indices, e.g. ``(0, 1)`` for a planar arm's x and y
+============== ==========================================================================
+
+Everything is computed from singular values (``jnp.linalg.svd(..., compute_uv=False)``, whose
+derivative ``u_i^T dJ v_i`` is finite everywhere), never from ``sqrt(det(J J^T))``, whose value
+is NaN and gradient infinite at exact singularities. The measures consider the m task-space axes
+of the selected rows: when m > dof the last m - dof axes have length 0 (the velocity ellipsoid is
+flat), exactly as ``sqrt(det(J J^T))`` would say.
+
+Translational and rotational measures do not depend on the basis (``"world_aligned"`` and
+``"local"`` Jacobians give the same values) but do depend on the point: use the Jacobian of the
+point you care about (for the wrist decoupling below, the wrist centre).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import JaxkinError, ShapeError
+from .jacobians import check_reference, geometric_jacobian
+from .kinematics import check_q, forward_pass
+from .model import Robot
+
+__all__ = [
+    "MEASURES",
+    "ROWS",
+    "DependentColumns",
+    "Ellipsoid",
+    "WristDecoupling",
+    "condition_number",
+    "dependent_columns",
+    "force_ellipsoid",
+    "joint_torques",
+    "manipulability",
+    "manipulability_gradient",
+    "near_singular",
+    "rank",
+    "singular_values",
+    "velocity_ellipsoid",
+    "wrist_centre",
+    "wrist_decoupling",
+]
+
+MEASURES = ("yoshikawa", "inverse_condition", "min_singular_value")
+ROWS = ("all", "translation", "rotation")
+_NAMED_ROWS = {"translation": (0, 1, 2), "rotation": (3, 4, 5)}
+
+
+# ----------------------------------------------------------------------------- validation
+def _check_J(J: Any, fn: str) -> jax.Array:
+    shape = getattr(J, "shape", None)
+    if shape is None:
+        try:
+            J = np.asarray(J, dtype=float)
+        except (TypeError, ValueError):
+            raise ShapeError(f"{fn}: J must be an array of numbers, got {J!r:.80}.") from None
+        shape = J.shape
+    if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
+        hint = ""
+        if len(shape) == 3:
+            hint = f" For a batch of Jacobians use jax.vmap, e.g. jax.vmap({fn})(Js)."
+        raise ShapeError(
+            f"{fn}: J must have shape (m, dof) (e.g. (6, dof) from jk.geometric_jacobian), got "
+            f"shape {tuple(shape)}.{hint}"
+        )
+    J = jnp.asarray(J)
+    if not jnp.issubdtype(J.dtype, jnp.floating):
+        J = J.astype(jnp.result_type(float))
+    return J
+
+
+def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
+    """Row indices selected by ``rows`` (None: all rows)."""
+    if isinstance(rows, str):
+        if rows == "all":
+            return None
+        if rows in _NAMED_ROWS:
+            if m != 6:
+                raise ShapeError(
+                    f"{fn}: rows={rows!r} needs a (6, dof) Jacobian with rows [v; omega], got "
+                    f"{m} rows. Pass explicit row indices instead, e.g. rows=(0, 1)."
+                )
+            return _NAMED_ROWS[rows]
+        raise JaxkinError(
+            f"{fn}: rows must be one of {ROWS} or a sequence of row indices, got {rows!r}."
+        )
+    if isinstance(rows, Sequence) and len(rows) > 0:
+        idx = []
+        for r in rows:
+            if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not -m <= r < m:
+                raise JaxkinError(
+                    f"{fn}: row index {r!r} is not an integer in [0, {m}) for a Jacobian with "
+                    f"{m} rows."
+                )
+            idx.append(int(r) % m)
+        if len(set(idx)) != len(idx):
+            raise JaxkinError(f"{fn}: rows {tuple(rows)} repeats a row.")
+        return tuple(idx)
+    raise JaxkinError(
+        f"{fn}: rows must be one of {ROWS} or a non-empty sequence of row indices, got {rows!r}."
+    )
+
+
+def _select(J: Any, rows: Any, fn: str) -> jax.Array:
+    J = _check_J(J, fn)
+    idx = _row_indices(rows, J.shape[0], fn)
+    return J if idx is None else J[jnp.array(idx)]
+
+
+def _check_measure(measure: str, fn: str) -> str:
+    if measure not in MEASURES:
+        raise JaxkinError(f"{fn}: measure must be one of {MEASURES}, got {measure!r}.")
+    return measure
+
+
+def _task_singular_values(Jr: jax.Array) -> jax.Array:
+    """The m singular values of an (m, n) matrix along the task-space axes, descending.
+
+    ``min(m, n)`` come from the SVD; for ``m > n`` the remaining ``m - n`` axes have length 0.
+    """
+    m, n = Jr.shape
+    s = jnp.linalg.svd(Jr, compute_uv=False)
+    if m > n:
+        s = jnp.concatenate([s, jnp.zeros(m - n, dtype=s.dtype)])
+    return s
+
+
+def _safe_ratio(num: jax.Array, den: jax.Array) -> jax.Array:
+    """``num / den``, 0 where ``den == 0`` (double-where: finite gradient there too)."""
+    ok = den > 0
+    safe = jnp.where(ok, den, jnp.ones_like(den))
+    return jnp.where(ok, num / safe, jnp.zeros_like(num))
+
+
+# ----------------------------------------------------------------------------- singular values
+def singular_values(J: Any, rows: Any = "all") -> jax.Array:
+    """Singular values of the selected rows of ``J``, descending; shape (min(m, dof),).
+
+    ``m`` is the number of selected rows (6, 3 or ``len(rows)``). Differentiable everywhere
+    (``d sigma_i = u_i^T dJ v_i``), including at repeated and zero singular values.
+    """
+    return jnp.linalg.svd(_select(J, rows, "jk.singular_values"), compute_uv=False)
+
+
+def _default_rtol(shape, dtype) -> float:
+    return float(max(shape) * np.finfo(dtype).eps)
+
+
+def rank(J: Any, rows: Any = "all", *, rtol: float | None = None, atol: float = 0.0) -> jax.Array:
+    """Numerical rank of the selected rows of ``J``: the number of singular values above
+    ``max(atol, rtol * sigma_max)``; int32 scalar.
+
+    ``rtol`` defaults to ``max(m, dof) * eps`` (NumPy's ``matrix_rank``); both thresholds are in
+    the Jacobian's units (m/rad or 1). For "is the robot close to a singularity" use
+    :func:`near_singular` with a threshold that means something for your task.
+    """
+    Jr = _select(J, rows, "jk.rank")
+    s = jnp.linalg.svd(Jr, compute_uv=False)
+    rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
+    tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * s[0])
+    return jnp.sum(s > tol).astype(jnp.int32)
+
+
+def manipulability(J: Any, measure: str = "yoshikawa", rows: Any = "all") -> jax.Array:
+    """A manipulability measure of the selected rows of ``J``; scalar, >= 0, never NaN.
+
+    With ``sigma_1 >= ... >= sigma_m`` the task-space singular values of the m selected rows
+    (zeros for the ``m - dof`` axes a robot with fewer joints than rows cannot move along):
+
+    * ``"yoshikawa"``: ``w = sigma_1 * ... * sigma_m``, which equals ``sqrt(det(J J^T))``
+      (Yoshikawa 1985): the volume of the velocity ellipsoid (up to a constant); 0 at a singularity.
+      Computed as a product of singular values, never as ``sqrt(det)``;
+    * ``"inverse_condition"``: ``sigma_m / sigma_1`` in [0, 1] (1: isotropic; 0: singular, also
+      for a zero Jacobian);
+    * ``"min_singular_value"``: ``sigma_m``, the smallest velocity gain (m/s or rad/s per unit
+      joint speed): the distance to the nearest singular matrix in the 2-norm.
+
+    ``rows`` is ``"all"``, ``"translation"`` (rows 0..2), ``"rotation"`` (rows 3..5) or a
+    sequence of row indices. ``"all"`` mixes metres and radians. Values and gradients (``jax.grad``
+    with respect to ``J``) are finite at exact singularities.
+    """
+    fn = "jk.manipulability"
+    _check_measure(measure, fn)
+    s = _task_singular_values(_select(J, rows, fn))
+    if measure == "yoshikawa":
+        return jnp.prod(s)
+    if measure == "min_singular_value":
+        return s[-1]
+    return _safe_ratio(s[-1], s[0])
+
+
+def condition_number(J: Any, rows: Any = "all") -> jax.Array:
+    """``sigma_1 / sigma_m`` of the selected rows (task-space axes); ``inf`` at a singularity.
+
+    For a bounded, differentiable measure use ``manipulability(J, "inverse_condition")``.
+    """
+    s = _task_singular_values(_select(J, rows, "jk.condition_number"))
+    inv = _safe_ratio(s[-1], s[0])
+    return jnp.where(inv > 0, 1.0 / jnp.where(inv > 0, inv, 1.0), jnp.inf)
+
+
+def near_singular(
+    J: Any, threshold: float, *, measure: str = "min_singular_value", rows: Any = "all"
+) -> jax.Array:
+    """True where ``manipulability(J, measure, rows) < threshold``; bool scalar.
+
+    The threshold has no default on purpose: it is in the measure's units (the default measure,
+    the smallest singular value, is in m/s or rad/s per rad/s of joint speed) and depends on the
+    task. ``measure`` and ``rows`` as in :func:`manipulability`.
+    """
+    return manipulability(J, measure=measure, rows=rows) < threshold
+
+
+class DependentColumns(NamedTuple):
+    """Which columns (joints) of a Jacobian are linearly dependent.
+
+    ``mask`` (dof,) bool: column i takes part in a linear dependency (it has a non-zero
+    coefficient in some null-space vector). ``null_space`` (dof, dof): the first ``nullity``
+    columns are an orthonormal basis of the null space (joint velocities that do not move the
+    selected task-space rows); the others are zero. ``nullity``: int32 scalar, dof - rank.
+    """
+
+    mask: jax.Array
+    null_space: jax.Array
+    nullity: jax.Array
+
+
+def dependent_columns(
+    J: Any,
+    rows: Any = "all",
+    *,
+    rtol: float | None = None,
+    atol: float = 0.0,
+    coefficient_tol: float = 1e-6,
+) -> DependentColumns:
+    """The linearly dependent columns of the selected rows of ``J`` (see :class:`DependentColumns`).
+
+    Singular values at or below ``max(atol, rtol * sigma_max)`` (``rtol`` default
+    ``max(m, dof) * eps``, as :func:`rank`) count as zero; a column is dependent when its
+    coefficient in a unit null-space vector exceeds ``coefficient_tol`` in magnitude. A redundant
+    robot (dof > rank) has a null space everywhere; at a singularity of a 6-dof arm the mask names
+    the joints whose motions became dependent (e.g. UR5 at q5 = 0: joints 2, 3, 4 and 6, whose axes
+    are then all parallel).
+
+    The basis is returned without derivative (``stop_gradient``): a null-space basis is not a
+    differentiable function of ``J`` where the rank changes.
+    """
+    Jr = _select(J, rows, "jk.dependent_columns")
+    n = Jr.shape[1]
+    _, s, Vt = jnp.linalg.svd(jax.lax.stop_gradient(Jr), full_matrices=True)
+    rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
+    tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * s[0])
+    s_full = jnp.zeros(n, dtype=s.dtype).at[: s.shape[0]].set(s)
+    is_null = s_full <= tol  # (n,), ordered: null directions last
+    if s.shape[0] < n:
+        is_null = is_null.at[s.shape[0] :].set(True)
+    V = Vt.T  # columns: right singular vectors
+    N = jnp.where(is_null[None, :], V, 0.0)
+    nullity = jnp.sum(is_null).astype(jnp.int32)
+    # Put the null directions first.
+    order = jnp.argsort(~is_null, stable=True)
+    N = N[:, order]
+    mask = jnp.any(jnp.abs(N) > coefficient_tol, axis=1)
+    return DependentColumns(mask=mask, null_space=N, nullity=nullity)
+
+
+def manipulability_gradient(
+    robot: Robot,
+    q: Any,
+    measure: str = "yoshikawa",
+    rows: Any = "all",
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+) -> jax.Array:
+    """``d m / d q`` of ``m(q) = manipulability(geometric_jacobian(robot, q, frame, point,
+    reference), measure, rows)``; shape (dof,). Exact (``jax.grad``), finite at singularities.
+
+    For Yoshikawa's measure over all rows of a (6, dof >= 6) Jacobian, away from singularities,
+    it equals ``dm/dq_k = m * vec(J H_k^T) . vec((J J^T)^-1)`` with ``H_k`` the kinematic Hessian
+    slice ``jk.kinematic_hessian(...)[k]`` (Haviland & Corke 2022; the Robotics Toolbox's
+    ``jacobm``); unlike that formula, the autodiff gradient stays finite at singularities.
+    """
+    fn = "jk.manipulability_gradient"
+    check_reference(reference)
+    _check_measure(measure, fn)
+    q = check_q(robot, q, fn=fn)
+    q = q.astype(jnp.result_type(robot.base.dtype, q.dtype))
+    f = robot.frame_index(frame)
+    # Validate rows eagerly (shape 6).
+    _row_indices(rows, 6, fn)
+
+    def m(qq):
+        J = geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+        return manipulability(J, measure=measure, rows=rows)
+
+    return jax.grad(m)(q)
+
+
+# ----------------------------------------------------------------------------- ellipsoids
+class Ellipsoid(NamedTuple):
+    """A task-space ellipsoid ``{x : x^T (axes diag(radii)^-2 axes^T) x <= 1}``.
+
+    ``axes`` (m, m): unit principal directions as columns (the left singular vectors of the
+    selected rows of J), in the Jacobian's basis; ``radii`` (m,): the semi-axis lengths, in the
+    order of ``axes``' columns.
+    """
+
+    axes: jax.Array
+    radii: jax.Array
+
+
+def _ellipsoid(J: Any, rows: Any, fn: str) -> tuple[jax.Array, jax.Array]:
+    Jr = _select(J, rows, fn)
+    U, _, _ = jnp.linalg.svd(jax.lax.stop_gradient(Jr), full_matrices=True)
+    return U, _task_singular_values(Jr)
+
+
+def velocity_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
+    """The velocity ellipsoid ``{J qd : |qd| <= 1}`` of the selected rows of ``J``.
+
+    Radii are the task-space singular values ``sigma_i`` (0 along directions the robot cannot
+    move in: at a singularity, or for m > dof); axes the left singular vectors. The default rows
+    are the translational ones (``"translation"``, m/s per unit joint speed), since an ellipsoid
+    mixing metres and radians has no geometric meaning. Radii are differentiable everywhere;
+    axes carry no derivative (``stop_gradient``: principal directions are not differentiable where
+    radii coincide).
+    """
+    U, s = _ellipsoid(J, rows, "jk.velocity_ellipsoid")
+    return Ellipsoid(axes=U, radii=s)
+
+
+def force_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
+    """The force ellipsoid ``{F : |J^T F| <= 1}`` (wrenches balanced by unit joint torques).
+
+    Same axes as :func:`velocity_ellipsoid`, radii ``1 / sigma_i``: ``inf`` along a singular
+    direction (the structure then holds any force along it with no joint torque). The gradient of
+    an infinite radius is 0 (double-where), never NaN.
+    """
+    U, s = _ellipsoid(J, rows, "jk.force_ellipsoid")
+    ok = s > 0
+    inv = jnp.where(ok, 1.0 / jnp.where(ok, s, 1.0), jnp.inf)
+    return Ellipsoid(axes=U, radii=inv)
+
+
+# ----------------------------------------------------------------------------- statics
+def joint_torques(J: Any, wrench: Any) -> jax.Array:
+    """Statics: the joint torques/forces ``tau = J^T F`` (dof,) that balance a wrench.
+
+    ``wrench`` (m,) is ordered like the rows of ``J``: ``[f; n]`` (force in N, moment in N m)
+    for a (6, dof) geometric Jacobian, with the moment taken about the Jacobian's point and both
+    in its basis (``world_aligned``: about the frame origin, world axes; ``world``: about the
+    world origin). ``tau`` is what the joints must exert for the end effector to apply ``F`` to
+    the environment (equivalently, what an external wrench ``-F`` loads them with); power:
+    ``F . (J qd) == tau . qd``.
+    """
+    J = _check_J(J, "jk.joint_torques")
+    F = jnp.asarray(wrench)
+    if F.shape != (J.shape[0],):
+        raise ShapeError(
+            f"jk.joint_torques: wrench must have shape ({J.shape[0]},) to match J's rows "
+            f"([f; n] for a 6-row Jacobian), got {F.shape}. Batch with jax.vmap."
+        )
+    return J.T @ F.astype(J.dtype)
+
+
+# ----------------------------------------------------------------------------- spherical wrist
+class WristDecoupling(NamedTuple):
+    """The arm/wrist decoupling of a 6-dof Jacobian at the wrist centre.
+
+    With ``J_c`` the (6, 6) world-aligned Jacobian of the wrist centre ``c`` (the point where the
+    three wrist axes meet), ``J_c = [[J11, J12], [J21, J22]]`` with ``J12 = 0``, so
+    ``det J = det J11 * det J22`` (``det J`` does not depend on the reference point).
+
+    Fields (scalars unless noted): ``det_J`` (of the tip Jacobian), ``det_arm`` (``det J11``: the
+    wrist centre's linear velocity from the three arm joints), ``det_wrist`` (``det J22``: the
+    angular velocity from the three wrist joints), ``sigma_min_arm``, ``sigma_min_wrist``
+    (their smallest singular values), ``arm_singular``, ``wrist_singular`` (bool: below the
+    threshold), ``wrist_centre`` (3,) in world coordinates, ``coupling`` (``max |J12|``; 0 for a
+    spherical wrist up to rounding), ``axis_distance`` (largest distance of a wrist axis from
+    ``wrist_centre``; 0 for a spherical wrist).
+    """
+
+    det_J: jax.Array
+    det_arm: jax.Array
+    det_wrist: jax.Array
+    sigma_min_arm: jax.Array
+    sigma_min_wrist: jax.Array
+    arm_singular: jax.Array
+    wrist_singular: jax.Array
+    wrist_centre: jax.Array
+    coupling: jax.Array
+    axis_distance: jax.Array
+
+
+def _wrist_joint_indices(robot: Robot, wrist_joints, fn: str) -> tuple[tuple[int, ...], tuple]:
+    if robot.dof != 6:
+        raise JaxkinError(
+            f"{fn}: the arm/wrist decoupling needs a 6-dof robot (3 arm joints, 3 wrist joints); "
+            f"robot {robot.name!r} has {robot.dof}."
+        )
+    if wrist_joints is None:
+        wrist = (3, 4, 5)
+    else:
+        wrist = []
+        for w in wrist_joints:
+            if isinstance(w, str):
+                if w not in robot.joint_names:
+                    raise JaxkinError(
+                        f"{fn}: unknown joint {w!r}; joints are {list(robot.joint_names)}."
+                    )
+                wrist.append(robot.joint_names.index(w))
+            elif isinstance(w, (int, np.integer)) and not isinstance(w, bool) and 0 <= w < 6:
+                wrist.append(int(w))
+            else:
+                raise JaxkinError(f"{fn}: wrist joint {w!r} is not a joint name or index 0..5.")
+        wrist = tuple(wrist)
+        if len(set(wrist)) != 3:
+            raise JaxkinError(f"{fn}: wrist_joints must name 3 distinct joints, got {wrist}.")
+    kinds = robot.joint_kinds
+    if any(kinds[i] != "revolute" for i in wrist):
+        raise JaxkinError(
+            f"{fn}: wrist joints {wrist} must be revolute (a spherical wrist), got "
+            f"{[kinds[i] for i in wrist]}."
+        )
+    arm = tuple(i for i in range(6) if i not in wrist)
+    # model joint (possibly several per q entry: use the first) driving each wrist q entry
+    joint_of = {}
+    for j, qi in enumerate(robot.q_index):
+        if qi >= 0 and qi not in joint_of:
+            joint_of[qi] = j
+    return arm, wrist, tuple(joint_of[i] for i in wrist)
+
+
+def wrist_centre(robot: Robot, q: Any, wrist_joints: Sequence[int | str] | None = None):
+    """The point (3,) closest, in least squares, to the three wrist joint axes (world
+    coordinates), and its largest distance from those axes (0 for a spherical wrist).
+
+    ``wrist_joints`` names or indexes the wrist joints (default: the last three). The three axes
+    of a spherical wrist meet in one point; two of them are always perpendicular, so the
+    least-squares problem is well posed even at a wrist singularity.
+    """
+    fn = "jk.wrist_centre"
+    _, _, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
+    q = check_q(robot, q, fn=fn)
+    return _wrist_centre(robot, q, wrist_model)
+
+
+def _wrist_centre(robot, q, wrist_model):
+    fp = forward_pass(robot, q)
+    dtype = fp.p.dtype
+    eye = jnp.eye(3, dtype=dtype)
+    A = jnp.zeros((3, 3), dtype=dtype)
+    b = jnp.zeros(3, dtype=dtype)
+    Ps = []
+    for j in wrist_model:
+        z, o = fp.z[j], fp.o[j]
+        P = eye - jnp.outer(z, z)
+        Ps.append((P, o))
+        A = A + P
+        b = b + P @ o
+    c = jnp.linalg.solve(A, b)
+    d2 = jnp.max(jnp.stack([jnp.sum((P @ (c - o)) ** 2) for P, o in Ps]))
+    pos = d2 > 0
+    dist = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)  # double-where: finite grad
+    return c, dist
+
+
+def wrist_decoupling(
+    robot: Robot,
+    q: Any,
+    threshold: float,
+    *,
+    frame: int | str | None = None,
+    wrist_joints: Sequence[int | str] | None = None,
+    check: bool = True,
+) -> WristDecoupling:
+    """Arm versus wrist singularities of a 6-dof robot with a spherical wrist.
+
+    Builds the world-aligned Jacobian of ``frame`` (default: the tip) and moves its point to the
+    wrist centre ``c`` (``v_c = v_tip + omega x (c - p_tip)``), which makes the upper-right block
+    zero: ``det J = det J11 * det J22``. ``J11`` (3x3: linear rows, arm joints) is singular at the
+    arm's singularities (elbow stretched, wrist centre on the shoulder axis), ``J22`` (3x3:
+    angular rows, wrist joints) at the wrist's (two wrist axes aligned). Flags use
+    ``sigma_min < threshold`` (m/s per rad/s for the arm, rad/s per rad/s for the wrist); the
+    threshold has no default.
+
+    Args:
+      robot: a 6-dof robot; ``wrist_joints`` (default the last three) must be revolute.
+      q: joint values (6,).
+      threshold: singular-value threshold of the flags.
+      frame: the frame whose Jacobian is decoupled (default: the tip).
+      wrist_joints: names or indices of the three wrist joints.
+      check: when called eagerly, raise :class:`~jaxkin.JaxkinError` if the wrist axes do not
+        meet in one point (``axis_distance > 1e-9 * max(1, |c|)``): the robot has no spherical
+        wrist and the decoupling does not hold. Under ``jit``/``vmap`` inspect
+        ``axis_distance`` and ``coupling`` yourself.
+    """
+    fn = "jk.wrist_decoupling"
+    arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
+    q = check_q(robot, q, fn=fn)
+    J = geometric_jacobian(robot, q, frame=frame)
+    T = forward_pass(robot, q)
+    p = T.p[robot.frame_index(frame)]
+    c, dist = _wrist_centre(robot, q, wrist_model)
+    r = c - p
+    Jv_c = J[:3] + jnp.cross(J[3:].T, r).T  # omega x r per column
+    J11 = Jv_c[:, jnp.array(arm)]
+    J12 = Jv_c[:, jnp.array(wrist)]
+    J22 = J[3:, jnp.array(wrist)]
+    s11 = jnp.linalg.svd(J11, compute_uv=False)
+    s22 = jnp.linalg.svd(J22, compute_uv=False)
+    out = WristDecoupling(
+        det_J=jnp.linalg.det(J),
+        det_arm=jnp.linalg.det(J11),
+        det_wrist=jnp.linalg.det(J22),
+        sigma_min_arm=s11[-1],
+        sigma_min_wrist=s22[-1],
+        arm_singular=s11[-1] < threshold,
+        wrist_singular=s22[-1] < threshold,
+        wrist_centre=c,
+        coupling=jnp.max(jnp.abs(J12)),
+        axis_distance=dist,
+    )
+    concrete = not any(
+        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((robot, q))
+    )
+    if check and concrete:
+        d = float(out.axis_distance)
+        scale = max(1.0, float(jnp.linalg.norm(c)))
+        if not d <= 1e-9 * scale:
+            raise JaxkinError(
+                f"{fn}: the wrist axes of robot {robot.name!r} (joints "
+                f"{[robot.joint_names[i] for i in wrist]}) do not meet in one point (largest "
+                f"distance from their least-squares intersection: {d:.3g} m), so the robot has no "
+                "spherical wrist and det J != det J11 det J22. Pass the right wrist_joints, or "
+                "analyse singular_values / dependent_columns of the full Jacobian instead."
+            )
+    return out

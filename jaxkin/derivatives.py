@@ -1,0 +1,236 @@
+"""Derivatives of the Jacobian: J-dot, J-dot qd and the kinematic Hessian, exact by autodiff.
+
+Every function here differentiates the Jacobian jaxkin already builds (the hand-built geometric
+Jacobian of :func:`jaxkin.geometric_jacobian`, or the analytical Jacobian of
+:func:`jaxkin.analytical_jacobian`) with ``jax.jvp`` / ``jax.jacfwd``: no finite differences, no
+second hand-written formula to keep in sync.
+
+Definitions (``J(q)`` the (6, dof) Jacobian of ``frame`` at ``point`` in ``reference``):
+
+* ``jacobian_dot(robot, q, qd)``: ``Jdot = d/dt J(q(t)) = sum_k dJ/dq_k qd_k``, shape (6, dof),
+  the time derivative of the matrix ``J`` in the same reference (one forward-mode pass:
+  ``jax.jvp(J, (q,), (qd,))``);
+* ``jacobian_dot_qd(robot, q, qd)``: ``Jdot @ qd``, shape (6,), the velocity-product term of the
+  acceleration ``d/dt (J qd) = J qdd + Jdot qd``. For ``reference="world_aligned"`` it is the
+  classical (not spatial) acceleration of the point, linear rows first, at ``qdd = 0``;
+* ``kinematic_hessian(robot, q)``: ``H[k, :, j] = d J[:, j] / d q_k``, shape (dof, 6, dof)
+  (``H[k]`` is the Jacobian's partial derivative with respect to ``q_k``); ``Jdot = sum_k H[k]
+  qd_k``. For revolute joints in ``world_aligned`` (Haviland & Corke 2022, part II):
+  ``H[k, :3, j] = z_a x Jv_b`` with ``a = min(k, j)``, ``b = max(k, j)`` (symmetric in k, j) and
+  ``H[k, 3:, j] = z_k x z_j`` for ``k < j``, zero for ``k >= j``.
+
+Reference frames (see :mod:`jaxkin.jacobians`): the matrix is differentiated *as expressed* in
+the given reference, so ``jacobian_dot(..., reference="local")`` is ``d/dt J_local``, which equals
+Pinocchio's ``getFrameJacobianTimeVariation(..., LOCAL)``; ``"world"`` equals Pinocchio's
+``WORLD`` and ``"world_aligned"`` its ``LOCAL_WORLD_ALIGNED`` (tests/test_derivatives.py checks
+all three, and Pinocchio's ``getJointKinematicHessian``).
+
+Each kernel takes one configuration; batch with ``jax.vmap``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import RepresentationSingularityError
+from .jacobians import analytical_jacobian, check_reference, geometric_jacobian
+from .kinematics import check_q
+from .model import Robot
+from .representations import check_representation
+
+__all__ = [
+    "analytical_jacobian_dot",
+    "analytical_jacobian_dot_qd",
+    "jacobian_dot",
+    "jacobian_dot_qd",
+    "kinematic_hessian",
+]
+
+
+def _dtype(robot: Robot, q: jax.Array):
+    return jnp.result_type(robot.base.dtype, q.dtype)
+
+
+def _q_qd(robot: Robot, q: Any, qd: Any, fn: str) -> tuple[jax.Array, jax.Array]:
+    q = check_q(robot, q, fn=fn)
+    qd = check_q(robot, qd, what="qd", fn=fn)
+    dtype = jnp.result_type(_dtype(robot, q), qd.dtype)
+    return q.astype(dtype), qd.astype(dtype)
+
+
+def jacobian_dot(
+    robot: Robot,
+    q: Any,
+    qd: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+) -> jax.Array:
+    """Time derivative ``Jdot = d/dt J(q(t))`` of the geometric Jacobian; shape (6, dof).
+
+    ``J`` is :func:`jaxkin.geometric_jacobian` of ``frame`` (default: the tip) at ``point`` (an
+    offset in the frame's axes) in ``reference``; rows ``[v; omega]``, columns follow ``q``.
+    Exact: one ``jax.jvp`` of the hand-built Jacobian in direction ``qd``.
+
+    Args:
+      robot: the robot.
+      q: joint values, shape (dof,).
+      qd: joint velocities, shape (dof,).
+      frame, point, reference: as in :func:`jaxkin.geometric_jacobian`.
+
+    Pinocchio: ``computeJointJacobiansTimeVariation(model, data, q, qd)``,
+    ``updateFramePlacements`` and ``getFrameJacobianTimeVariation(model, data, frame_id, rf)``
+    with ``rf`` LOCAL_WORLD_ALIGNED / LOCAL / WORLD for ``"world_aligned"`` / ``"local"`` /
+    ``"world"``.
+    """
+    check_reference(reference)
+    q, qd = _q_qd(robot, q, qd, "jk.jacobian_dot")
+    f = robot.frame_index(frame)
+
+    def J(qq):
+        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+
+    return jax.jvp(J, (q,), (qd,))[1]
+
+
+def jacobian_dot_qd(
+    robot: Robot,
+    q: Any,
+    qd: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+) -> jax.Array:
+    """``Jdot @ qd``, shape (6,): the velocity-product (bias) term of ``d/dt (J qd)``.
+
+    With ``reference="world_aligned"`` this is ``[a; alpha]`` of the point (classical linear
+    acceleration of the frame origin or ``point`` in world axes, and angular acceleration) when
+    ``qdd = 0``; add ``J @ qdd`` for the full acceleration. Shapes: ``q``, ``qd`` (dof,).
+    Computed as one ``jax.jvp`` of the twist ``q -> J(q) @ qd`` (no (6, dof) matrix formed).
+    """
+    check_reference(reference)
+    q, qd = _q_qd(robot, q, qd, "jk.jacobian_dot_qd")
+    f = robot.frame_index(frame)
+
+    def V(qq):
+        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference) @ qd
+
+    return jax.jvp(V, (q,), (qd,))[1]
+
+
+def kinematic_hessian(
+    robot: Robot,
+    q: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+) -> jax.Array:
+    """The kinematic Hessian ``H[k, :, j] = d J[:, j] / d q_k``; shape (dof, 6, dof).
+
+    ``H[k]`` (6, dof) is the partial derivative of the geometric Jacobian (``frame``, ``point``,
+    ``reference`` as in :func:`jaxkin.geometric_jacobian`; rows ``[v; omega]``) with respect to
+    joint ``k``; ``Jdot = einsum("k,kij->ij", qd, H)``. Exact: ``jax.jacfwd`` of the hand-built
+    Jacobian.
+
+    Index order against other libraries: Pinocchio's ``getJointKinematicHessian`` (joint frames
+    only) returns the buffer of a column-major (6, nv, nv) Eigen tensor as a C-ordered numpy array,
+    so read it as ``P.reshape(nv, nv, 6)[k, j, :] == H[k, :, j]`` (ORACLES.md: "H[k, j, i]");
+    the Robotics Toolbox's ``hessian0(q)`` is (n, 6, n) and equals ``H`` for
+    ``reference="world_aligned"`` at the tip.
+    """
+    check_reference(reference)
+    q = check_q(robot, q, fn="jk.kinematic_hessian")
+    q = q.astype(_dtype(robot, q))
+    f = robot.frame_index(frame)
+
+    def J(qq):
+        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+
+    dJ = jax.jacfwd(J)(q)  # (6, dof_j, dof_k)
+    return jnp.transpose(dJ, (2, 0, 1))
+
+
+# ----------------------------------------------------------------------------- analytical
+def _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd):
+    if return_margin:
+        return Jad, margin
+    dtype = Jad.dtype
+    tol = float(np.sqrt(np.finfo(dtype).eps)) if singular_tol is None else float(singular_tol)
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((robot, q, qd)))
+    if not traced:
+        m = float(margin)
+        if m < tol:
+            raise RepresentationSingularityError(
+                f"the {representation!r} representation is singular here (margin {m:.3g} < "
+                f"{tol:.3g}): the analytical Jacobian and its derivative are unbounded. Use "
+                "jk.jacobian_dot (geometric), another representation, or return_margin=True."
+            )
+        return Jad
+    return jnp.where(margin < tol, jnp.full_like(Jad, jnp.nan), Jad)
+
+
+def analytical_jacobian_dot(
+    robot: Robot,
+    q: Any,
+    qd: Any,
+    representation: str = "rpy",
+    frame: int | str | None = None,
+    point: Any = None,
+    *,
+    singular_tol: float | None = None,
+    return_margin: bool = False,
+):
+    """Time derivative of the analytical Jacobian ``d/dt J_a(q(t))``; shape (6, dof).
+
+    ``J_a = d[p; phi]/dq`` as in :func:`jaxkin.analytical_jacobian` (``p`` the frame origin or
+    ``point`` in world coordinates, ``phi`` the orientation in ``representation``: ``"rpy"``,
+    ``"zyz"`` or ``"rotvec"``); rows ``[dp; dphi]``. ``d/dt [p; phi] = J_a qd`` and
+    ``d2/dt2 [p; phi] = J_a qdd + Jdot_a qd``.
+
+    Representation singularities are handled as in :func:`jaxkin.analytical_jacobian`: eagerly,
+    a margin below ``singular_tol`` raises :class:`~jaxkin.RepresentationSingularityError`; under
+    ``jit``/``vmap`` the result is all NaN there; ``return_margin=True`` returns
+    ``(Jdot_a, margin)`` unmasked.
+    """
+    check_representation(representation)
+    q, qd = _q_qd(robot, q, qd, "jk.analytical_jacobian_dot")
+    f = robot.frame_index(frame)
+
+    def Ja(qq):
+        return analytical_jacobian(
+            robot, qq, representation, frame=f, point=point, return_margin=True
+        )
+
+    (_, margin), (Jad, _) = jax.jvp(Ja, (q,), (qd,))
+    return _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd)
+
+
+def analytical_jacobian_dot_qd(
+    robot: Robot,
+    q: Any,
+    qd: Any,
+    representation: str = "rpy",
+    frame: int | str | None = None,
+    point: Any = None,
+    *,
+    singular_tol: float | None = None,
+    return_margin: bool = False,
+):
+    """``Jdot_a @ qd``, shape (6,): ``d2/dt2 [p; phi]`` at ``qdd = 0`` (``phi`` in
+    ``representation``). Singularities as in :func:`analytical_jacobian_dot`."""
+    check_representation(representation)
+    q, qd = _q_qd(robot, q, qd, "jk.analytical_jacobian_dot_qd")
+    f = robot.frame_index(frame)
+
+    def xd(qq):
+        Ja, margin = analytical_jacobian(
+            robot, qq, representation, frame=f, point=point, return_margin=True
+        )
+        return Ja @ qd, margin
+
+    (_, margin), (acc, _) = jax.jvp(xd, (q,), (qd,))
+    return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
