@@ -26,8 +26,8 @@ Every answer is judged the same way, with jaxkin's float64 forward kinematics (c
 Pinocchio and the Robotics Toolbox at start-up): *success* = position error <= 1e-9 m and
 orientation error <= 1e-9 rad (ORACLES.md: converged IK pose) and every joint within its limits;
 the loose column uses 1e-6. The Pinocchio model and the pytorch_kinematics chain come from one
-URDF generated here from the zoo's modified-DH numbers; the toolbox's ``models.DH.Panda`` has
-the same table (tests/test_oracle_rtb.py) and gets the zoo's tool.
+URDF that ``jk.to_urdf`` writes from the zoo's modified-DH Panda; the toolbox's
+``models.DH.Panda`` has the same table (tests/test_oracle_rtb.py) and gets the zoo's tool.
 
 Usage: ``python3 -m bench.ik [--n N] [--seeds S] [--quick] [--out PATH]``; writes
 ``bench/results/ik.json`` and prints a markdown table.
@@ -39,7 +39,6 @@ import argparse
 import datetime
 import gc
 import json
-import math
 import os
 import platform
 import sys
@@ -66,66 +65,6 @@ def _log(msg: str) -> None:
 
 
 # ----------------------------------------------------------------------------- models
-def _rot_x(t):
-    c, s = math.cos(t), math.sin(t)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_z(t):
-    c, s = math.cos(t), math.sin(t)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _rpy(R: np.ndarray) -> np.ndarray:
-    yaw = math.atan2(R[1, 0], R[0, 0])
-    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
-    roll = math.atan2(R[2, 1], R[2, 2])
-    return np.array([roll, pitch, yaw])
-
-
-def _origin(T: np.ndarray) -> str:
-    xyz = " ".join(repr(float(x)) for x in T[:3, 3])
-    rpy = " ".join(repr(float(x)) for x in _rpy(T[:3, :3]))
-    return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
-
-
-def urdf_from_modified_dh(robot: jk.Robot) -> str:
-    """A URDF with the numbers of a modified-DH jaxkin robot: joint i's origin is
-    ``Rx(alpha) Tx(a) Rz(theta) Tz(d)``, axis z; the tool is a fixed joint to link ``tool``."""
-    if robot.parameterisation != "dh_modified":
-        raise ValueError(f"expected a modified-DH robot, got {robot.parameterisation!r}")
-    P = {k: np.asarray(v, dtype=np.float64) for k, v in robot.params.items()}
-    lower, upper = np.asarray(robot.lower), np.asarray(robot.upper)
-    names = robot.frame_names
-    out = [f'<robot name="{robot.name}">'] + [f'  <link name="{n}"/>' for n in names]
-    for i in range(robot.n_joints):
-        B = np.eye(4)
-        B[:3, :3] = _rot_x(P["alpha"][i]) @ _rot_z(P["theta"][i])
-        B[:3, 3] = [
-            P["a"][i],
-            -math.sin(P["alpha"][i]) * P["d"][i],
-            math.cos(P["alpha"][i]) * P["d"][i],
-        ]
-        out += [
-            f'  <joint name="{robot.joint_names[i]}" type="revolute">',
-            f'    <parent link="{names[i]}"/><child link="{names[i + 1]}"/>',
-            f"    {_origin(B)}",
-            '    <axis xyz="0 0 1"/>',
-            f'    <limit lower="{float(lower[i])!r}" upper="{float(upper[i])!r}" effort="87" '
-            'velocity="2.175"/>',
-            "  </joint>",
-        ]
-    if robot.has_tool:
-        out += [
-            '  <joint name="tool_joint" type="fixed">',
-            f'    <parent link="{names[-2]}"/><child link="tool"/>',
-            f"    {_origin(np.asarray(robot.tool, dtype=np.float64))}",
-            "  </joint>",
-        ]
-    out.append("</robot>")
-    return "\n".join(out)
-
-
 def sample_within_limits(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
     lo, hi = np.asarray(robot.lower, dtype=np.float64), np.asarray(robot.upper, dtype=np.float64)
     return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
@@ -417,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = sample_within_limits(robot, args.seeds, START_SEED)
     Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(q_star)))
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
-    urdf = urdf_from_modified_dh(robot)
+    urdf = jk.to_urdf(robot)
 
     import pinocchio as pin
     import roboticstoolbox as rtb

@@ -1,0 +1,223 @@
+"""Write a :class:`~jaxkin.Robot` as URDF, for Pinocchio, MuJoCo, RViz or any URDF reader.
+
+:func:`to_urdf` turns any jaxkin robot (standard or modified DH, URDF-like placements, trees,
+mimic joints, base and tool) into a URDF string whose links carry the robot's frame names, so
+``fk(robot, q, frame=name)`` and the other library's pose of link ``name`` agree. Each joint's
+motion ``B_j Motion(axis_j, m_j q + o_j) A_j`` (see :mod:`jaxkin.model`) is written as:
+
+* a URDF joint with origin ``B_j Motion(axis_j, o_j)`` (the zero offset folded into the origin),
+  the joint's axis and limits, whose child is the frame itself when ``A_j`` is the identity;
+* otherwise (standard DH) a child link ``<frame>_motion`` and a fixed joint ``<frame>_dh`` with
+  origin ``A_j`` from it to the frame;
+* joints sharing one entry of ``q`` become URDF ``<mimic>`` joints of the first of them with
+  multiplier ``m_j`` (offset 0: offsets live in the origins).
+
+A base transform other than the identity adds a root link ``world`` (a fixed joint
+``base_placement`` places ``base``); a tool adds the fixed joint ``tool_placement``. Numbers are
+written with ``repr`` (shortest round-tripping float64), orientations as URDF rpy
+(``R = Rz(yaw) Ry(pitch) Rx(roll)``, which rebuilds ``R`` to rounding even at pitch +-pi/2).
+
+What URDF cannot say raises :class:`~jaxkin.ModelError`: an independent joint scaled by a
+multiplier other than +-1, a revolute joint bounded on one side only, and (unless
+``prismatic_limit`` is given) an unbounded prismatic joint.
+"""
+
+from __future__ import annotations
+
+import math
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from ._jit import is_concrete
+from .errors import ModelError
+from .kinematics import joint_placements
+from .model import Robot
+
+__all__ = ["to_urdf"]
+
+
+def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the unit ``axis`` (Rodrigues)."""
+    k = axis / np.linalg.norm(axis)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+
+
+def _transform(R: np.ndarray | None, p: np.ndarray | None) -> np.ndarray:
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if p is not None:
+        T[:3, 3] = p
+    return T
+
+
+def _rpy(R: np.ndarray) -> tuple[float, float, float]:
+    """URDF (roll, pitch, yaw) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``, stable at pitch = +-pi/2:
+    yaw first, then roll and pitch from ``Rz(-yaw) R = Ry(pitch) Rx(roll)`` (whose second row is
+    ``[0, cos(roll), -sin(roll)]`` and first column ``[cos(pitch), 0, -sin(pitch)]`` for any yaw)."""
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    M = _rot(np.array([0.0, 0.0, 1.0]), -yaw) @ R
+    return math.atan2(-M[1, 2], M[1, 1]), math.atan2(-M[2, 0], M[0, 0]), yaw
+
+
+def _num(x: float) -> str:
+    x = float(x)
+    return "0" if x == 0.0 else repr(x)
+
+
+def _origin(T: np.ndarray) -> str:
+    xyz = " ".join(_num(v) for v in T[:3, 3])
+    rpy = " ".join(_num(v) for v in _rpy(T[:3, :3]))
+    return f"<origin xyz={quoteattr(xyz)} rpy={quoteattr(rpy)}/>"
+
+
+def _fixed(name: str, parent: str, child: str, T: np.ndarray) -> list[str]:
+    return [
+        f'  <joint name={quoteattr(name)} type="fixed">',
+        f"    <parent link={quoteattr(parent)}/>",
+        f"    <child link={quoteattr(child)}/>",
+        f"    {_origin(T)}",
+        "  </joint>",
+    ]
+
+
+def _fresh(name: str, taken: set[str]) -> str:
+    out = name
+    while out in taken:
+        out += "_"
+    taken.add(out)
+    return out
+
+
+def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
+    """The robot as a URDF document (a ``str``); see the module doc for the mapping.
+
+    Args:
+      robot: a robot with concrete (not traced) parameters.
+      prismatic_limit: for prismatic joints without limits: write ``[-L, L]`` metres (URDF has no
+        unbounded prismatic joint). Default: raise instead.
+
+    Returns:
+      URDF XML with one link per frame of ``robot.frame_names`` (plus ``<frame>_motion`` links
+      for standard DH and a ``world`` root when ``robot.base`` is not the identity) and one
+      revolute/continuous/prismatic joint per entry of ``q`` named ``robot.joint_names``.
+      ``jk.load_urdf(to_urdf(robot))`` gives the same pose for every frame name.
+    """
+    if not isinstance(robot, Robot):
+        raise ModelError(f"to_urdf expects a jaxkin Robot, got {type(robot).__name__}.")
+    if not is_concrete(robot):
+        raise ModelError(
+            "to_urdf needs concrete parameters; call it outside jit/vmap/grad (a URDF is text)."
+        )
+    if prismatic_limit is not None and not (math.isfinite(prismatic_limit) and prismatic_limit > 0):
+        raise ModelError(f"prismatic_limit must be a positive number, got {prismatic_limit!r}.")
+    f64 = lambda x: np.asarray(x, dtype=np.float64)  # noqa: E731
+    pl = joint_placements(robot, xp=np)
+    axis, offset, mult = f64(robot.axis), f64(robot.offset), f64(robot.multiplier)
+    lower, upper = f64(robot.lower), f64(robot.upper)
+    frames = list(robot.frame_names)
+    links = set(frames)  # URDF keeps link and joint names apart
+    joints = set(robot.joint_names)
+    extra_links: list[str] = []
+
+    def new_link(name: str) -> str:
+        name = _fresh(name, links)
+        extra_links.append(name)
+        return name
+
+    # the independent joint of each q entry: the first joint driving it with multiplier +-1
+    leader: dict[int, int] = {}
+    for j, i in enumerate(robot.q_index):
+        if i >= 0 and i not in leader and abs(abs(mult[j]) - 1.0) <= 1e-12:
+            leader[i] = j
+    for i, name in enumerate(robot.joint_names):
+        if i not in leader:
+            raise ModelError(
+                f"to_urdf: joint {name!r} is driven with multiplier "
+                f"{float(mult[robot.q_index.index(i)])!r}; URDF can scale only mimic joints. Build the "
+                "robot with multiplier 1 (scale q instead)."
+            )
+
+    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>"]
+    body: list[str] = []
+    base = f64(robot.base)
+    if not np.array_equal(base, np.eye(4)):
+        world = _fresh("world", links)
+        lines.append(f"  <link name={quoteattr(world)}/>")
+        body += _fixed(_fresh("base_placement", joints), world, frames[0], base)
+    for j, kind in enumerate(robot.kinds):
+        parent, child = frames[robot.parents[j]], frames[j + 1]
+        B = _transform(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
+        has_A = pl.A is not None
+        motion_link = new_link(f"{child}_motion") if has_A else child
+        i = robot.q_index[j]
+        if kind == "fixed":
+            body += _fixed(_fresh(f"{child}_joint", joints), parent, motion_link, B)
+        else:
+            a = axis[j] / np.linalg.norm(axis[j])
+            if kind == "revolute":
+                B = B @ _transform(_rot(a, offset[j]), None)
+            else:
+                B = B @ _transform(None, a * offset[j])
+            lead = leader[i]
+            if lead == j:
+                name, a_out = robot.joint_names[i], a * np.sign(mult[j])
+                lo, hi = lower[i], upper[i]
+            else:
+                name, a_out = _fresh(f"{child}_joint", joints), a
+                lo, hi = sorted((mult[j] * lower[i], mult[j] * upper[i]))
+            urdf_type, limit = _limits(kind, lo, hi, name, prismatic_limit)
+            body += [
+                f"  <joint name={quoteattr(name)} type={quoteattr(urdf_type)}>",
+                f"    <parent link={quoteattr(parent)}/>",
+                f"    <child link={quoteattr(motion_link)}/>",
+                f"    {_origin(B)}",
+                f"    <axis xyz={quoteattr(' '.join(_num(v) for v in a_out))}/>",
+                *([f"    {limit}"] if limit else []),
+                *(
+                    []
+                    if lead == j
+                    else [
+                        f"    <mimic joint={quoteattr(robot.joint_names[i])} "
+                        f"multiplier={quoteattr(_num(mult[j] * np.sign(mult[lead])))} "
+                        'offset="0"/>'
+                    ]
+                ),
+                "  </joint>",
+            ]
+        if has_A:
+            A = _transform(pl.A[0][j], pl.A[1][j])
+            body += _fixed(_fresh(f"{child}_dh", joints), motion_link, child, A)
+    if robot.has_tool:
+        body += _fixed(_fresh("tool_placement", joints), frames[-2], frames[-1], f64(robot.tool))
+    lines += [f"  <link name={quoteattr(n)}/>" for n in frames + extra_links]
+    lines += body
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def _limits(kind, lo, hi, name, prismatic_limit) -> tuple[str, str | None]:
+    """URDF joint type and ``<limit>`` element of one moving joint."""
+    effort = 'effort="0" velocity="0"'
+    finite = math.isfinite(lo), math.isfinite(hi)
+    if kind == "revolute":
+        if not any(finite):
+            return "continuous", None
+        if not all(finite):
+            raise ModelError(
+                f"to_urdf: revolute joint {name!r} is bounded on one side only ({lo}, {hi}); "
+                "URDF joints are either continuous or bounded on both sides. Give it both "
+                "limits (robot.replace(lower=..., upper=...))."
+            )
+    elif not all(finite):
+        if prismatic_limit is None:
+            raise ModelError(
+                f"to_urdf: prismatic joint {name!r} has no limit on one side ({lo}, {hi}) and "
+                "URDF has no unbounded prismatic joint. Pass prismatic_limit=L to write [-L, L] "
+                "metres for missing limits, or give the joint limits."
+            )
+        lo = lo if math.isfinite(lo) else -prismatic_limit
+        hi = hi if math.isfinite(hi) else prismatic_limit
+    return kind, f'<limit lower="{_num(lo)}" upper="{_num(hi)}" {effort}/>'
