@@ -519,10 +519,43 @@ def _finish(robot, T_target, q, steps, seed, hit_max, unreachable, f, tol) -> IK
     )
 
 
+def _starts(robot, q0, extra, key, n, num_seeds, dtype):
+    """(N, S, dof) starts: ``q0`` first, then ``extra`` (given) or ``num_seeds - 1`` random
+    configurations within the limits; all clipped to the limits."""
+    lo, hi = robot.lower.astype(dtype), robot.upper.astype(dtype)
+    q0 = jnp.broadcast_to(q0.astype(dtype), (n, robot.dof))[:, None]
+    if extra is not None:
+        extra = extra.astype(dtype)
+        if extra.ndim == 2:
+            extra = jnp.broadcast_to(extra[None], (n, *extra.shape))
+    elif num_seeds > 1:
+        k = jax.random.key(0) if key is None else key
+        extra = sample_configurations(robot, k, n * (num_seeds - 1)).astype(dtype)
+        extra = extra.reshape(n, num_seeds - 1, robot.dof)
+    starts = q0 if extra is None else jnp.concatenate([q0, extra], 1)
+    return jnp.clip(starts, lo[None, None], hi[None, None])
+
+
 def _solve_batch_impl(
-    robot, T_all, seeds, tol, lam0, max_steps, patience, *, f, method, optimizer, lanes
+    robot,
+    T_all,
+    q0,
+    extra,
+    key,
+    tol,
+    lam0,
+    max_steps,
+    patience,
+    *,
+    f,
+    method,
+    optimizer,
+    lanes,
+    num_seeds,
 ):
-    dtype = seeds.dtype
+    T_all = T_all.reshape(-1, 4, 4)
+    dtype = T_all.dtype
+    seeds = _starts(robot, q0, extra, key, T_all.shape[0], num_seeds, dtype)
     base_p = robot.base[:3, 3].astype(dtype)
     bound = _reach_bound(robot, f).astype(dtype)
     dist = jax.vmap(lambda T: _safe_norm(T[:3, 3] - base_p))(T_all)
@@ -540,7 +573,7 @@ def _solve_batch_impl(
     )
 
 
-_solve_batch = robot_jit(_solve_batch_impl, ("f", "method", "optimizer", "lanes"))
+_solve_batch = robot_jit(_solve_batch_impl, ("f", "method", "optimizer", "lanes", "num_seeds"))
 
 
 def _check_targets(T: Any, fn: str, dtype) -> tuple[jax.Array, bool]:
@@ -653,49 +686,36 @@ def solve_ik(
     dtype = np.dtype(robot.dtype)
     T, batched = _check_targets(T_target, fn, dtype)
     N = T.shape[0] if batched else 1
-    q0 = jnp.asarray(q0) if hasattr(q0, "shape") else jnp.asarray(np.asarray(q0, dtype=float))
-    if batched and q0.shape == (N, robot.dof):
-        q0s = q0
-    else:
+    q0 = jnp.asarray(q0) if hasattr(q0, "shape") else np.asarray(q0, dtype=float)
+    if not (batched and tuple(q0.shape) == (N, robot.dof)):
         q0 = check_q(robot, q0, what="q0", fn=fn)
-        q0s = jnp.broadcast_to(q0, (N, robot.dof))
-    q0s = q0s.astype(dtype)
-    if is_concrete(q0s):
-        q0n = np.asarray(q0s, dtype=np.float64)
-        if not np.all(np.isfinite(q0n)):
-            raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
-    lo, hi = robot.lower.astype(dtype), robot.upper.astype(dtype)
-    q0s = jnp.clip(q0s, lo[None], hi[None])
+    if is_concrete(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
+        raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
     if seeds is not None:
-        extra = jnp.asarray(seeds)
-        if extra.ndim == 2 and extra.shape[1] == robot.dof:
-            extra = jnp.broadcast_to(extra[None], (N, *extra.shape))
-        if extra.ndim != 3 or extra.shape[0] != N or extra.shape[2] != robot.dof:
+        shape = tuple(jnp.shape(seeds))
+        if not (
+            (len(shape) == 2 and shape[1] == robot.dof)
+            or (len(shape) == 3 and shape[0] == N and shape[2] == robot.dof)
+        ):
             raise ShapeError(
                 f"{fn}: seeds must have shape (S, {robot.dof}) (the same extra starts for every "
-                f"target) or ({N}, S, {robot.dof}), got {tuple(jnp.shape(seeds))}."
+                f"target) or ({N}, S, {robot.dof}), got {shape}."
             )
         if num_seeds != 1:
             raise JaxkinError(f"{fn}: give seeds= or num_seeds=, not both.")
-        extra = jnp.clip(extra.astype(dtype), lo[None, None], hi[None, None])
-        seeds = jnp.concatenate([q0s[:, None], extra], 1)
-    elif num_seeds > 1:
-        k = jax.random.key(0) if key is None else key
-        extra = sample_configurations(robot, k, N * (num_seeds - 1)).astype(dtype)
-        seeds = jnp.concatenate([q0s[:, None], extra.reshape(N, num_seeds - 1, robot.dof)], 1)
-    else:
-        seeds = q0s[:, None]
+        seeds = jnp.asarray(seeds) if hasattr(seeds, "shape") else np.asarray(seeds, dtype=float)
     if tol is None:
         tol = 1e-10 if dtype == np.float64 else 1e-5
     if not tol > 0:
         raise JaxkinError(f"{fn}: tol must be > 0, got {tol!r}.")
     if method == "optax" and optimizer is None:
         optimizer = _default_optimizer()
-    T = T if batched else T[None]
     sol = _solve_batch(
         robot,
         T,
+        q0,
         seeds,
+        key if num_seeds > 1 else None,
         jnp.asarray(tol, dtype),
         jnp.asarray(damping, dtype),
         jnp.asarray(max_steps, jnp.int32),
@@ -704,6 +724,7 @@ def solve_ik(
         method=method,
         optimizer=optimizer if method == "optax" else None,
         lanes=_lanes(N) if lanes is None else int(lanes),
+        num_seeds=num_seeds,
     )
     if not batched:
         sol = jax.tree_util.tree_map(lambda x: x[0], sol)

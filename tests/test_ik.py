@@ -13,20 +13,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 
 import jaxkin as jk
 from jaxkin.ik import RESULTS
 
 N_TARGETS = 300
 SEEDS = 16
-
-
-def _uniform(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo = np.asarray(robot.lower, dtype=float)
-    hi = np.asarray(robot.upper, dtype=float)
-    lo = np.where(np.isfinite(lo), lo, -math.pi)
-    hi = np.where(np.isfinite(hi), hi, math.pi)
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
 
 
 def _pose_errors(T: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -49,8 +42,8 @@ _fk_batch = jax.jit(jax.vmap(jk.fk, in_axes=(None, 0)), static_argnums=0)
 @pytest.mark.parametrize("name", ["panda", "ur5", "niryo_one"])
 def test_round_trip_random_reachable_targets(name):
     robot = jk.robots.load(name, dtype=np.float64)
-    q_star = _uniform(robot, N_TARGETS, 1)
-    q0 = _uniform(robot, N_TARGETS, 2)  # a random start, not the answer
+    q_star = sample_configurations(robot, N_TARGETS, 1)
+    q0 = sample_configurations(robot, N_TARGETS, 2)  # a random start, not the answer
     T_target = np.asarray(_fk_batch(robot, jnp.asarray(q_star)))
     sol = jk.solve_ik(robot, T_target, q0, num_seeds=SEEDS, key=jax.random.key(3), throw=False)
     sol = jax.tree_util.tree_map(np.asarray, sol)
@@ -153,9 +146,9 @@ def test_continuous_joints_are_not_clipped_and_limits_hold():
 
 def test_optax_multistart_path():
     robot = jk.robots.load("puma560", dtype=np.float64)
-    q_star = _uniform(robot, 12, 5)
+    q_star = sample_configurations(robot, 12, 5)
     T = np.asarray(_fk_batch(robot, jnp.asarray(q_star)))
-    q0 = _uniform(robot, 12, 6)
+    q0 = sample_configurations(robot, 12, 6)
     q0[0] = q_star[0]  # started exactly at the solution: zero gradient, not NaN
     sol = jk.solve_ik(
         robot, T, q0, method="optax", num_seeds=8, tol=1e-8, max_steps=200, patience=20, throw=False
@@ -176,9 +169,11 @@ def test_optax_multistart_path():
 
 def test_float32():
     robot = jk.robots.load("panda", dtype=np.float32)
-    q_star = _uniform(robot, 20, 8).astype(np.float32)
+    q_star = sample_configurations(robot, 20, 8).astype(np.float32)
     T = np.asarray(_fk_batch(robot, jnp.asarray(q_star)))
-    sol = jk.solve_ik(robot, T, _uniform(robot, 20, 9).astype(np.float32), num_seeds=8, throw=False)
+    sol = jk.solve_ik(
+        robot, T, sample_configurations(robot, 20, 9).astype(np.float32), num_seeds=8, throw=False
+    )
     assert sol.q.dtype == jnp.float32
     assert float(jnp.mean(sol.converged)) >= 0.95  # default tol 1e-5 in float32
     ok = np.asarray(sol.converged)
@@ -198,3 +193,29 @@ def test_errors(ur5):
         jk.solve_ik(ur5, np.eye(4), np.zeros(6), num_seeds=0)
     with pytest.raises(jk.JaxkinError, match="NaN"):
         jk.solve_ik(ur5, np.eye(4), np.full(6, np.nan))
+    with pytest.raises(jk.ShapeError, match=r"seeds must have shape \(S, 6\)"):
+        jk.solve_ik(ur5, np.eye(4), np.zeros(6), seeds=np.zeros((3, 5)))
+    with pytest.raises(jk.JaxkinError, match="seeds= or num_seeds="):
+        jk.solve_ik(ur5, np.eye(4), np.zeros(6), seeds=np.zeros((3, 6)), num_seeds=4)
+
+
+def test_explicit_seeds_are_tried_after_q0(ur5):
+    q_star = np.array([0.3, -1.1, 1.2, -0.4, 0.9, 0.2])
+    T = np.asarray(jk.fk(ur5, q_star))
+    bad = np.array([3.0, 3.0, -3.0, 3.0, -3.0, 3.0])  # far from q_star
+    # the same extra starts for every target, or one set per target: q_star is the second start
+    for seeds, Ts in ((q_star[None], T), (np.stack([[q_star], [q_star]]), np.stack([T, T]))):
+        sol = jk.solve_ik(ur5, Ts, bad, seeds=seeds, max_steps=1, patience=1, throw=False)
+        assert np.all(np.asarray(sol.converged)) and np.all(np.asarray(sol.seed) == 1)
+
+
+def test_new_target_values_and_starts_do_not_recompile(ur5):
+    jitted = jk.ik._solve_batch.get_jitted()
+    qs = sample_configurations(ur5, 8, 11)
+    T = np.asarray(_fk_batch(ur5, jnp.asarray(qs)))
+    before = jitted._cache_size()
+    for k in range(3):  # new targets, starts and tolerances: one compile for this shape
+        jk.solve_ik(ur5, T[k : k + 4], qs[k + 1], num_seeds=2, tol=1e-10 * (k + 1), throw=False)
+    assert jitted._cache_size() == before + 1
+    jk.solve_ik(ur5, T[:5], qs[0], num_seeds=2, throw=False)  # a new batch size compiles again
+    assert jitted._cache_size() == before + 2
