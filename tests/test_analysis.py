@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 from _xla import FAST_COMPILE
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -27,20 +28,12 @@ SEED = 5
 ROWS = ("all", "translation", "rotation")
 
 
-def _uniform(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo = np.asarray(robot.lower, dtype=float)
-    hi = np.asarray(robot.upper, dtype=float)
-    lo = np.where(np.isfinite(lo), lo, -math.pi)
-    hi = np.where(np.isfinite(hi), hi, math.pi)
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
-
-
 # ------------------------------------------------------------------------- UR5 wrist singularity
 @pytest.fixture(scope="module")
 def ur5_wrist():
     """UR5 at q5 = 0 (joints 4 and 6 aligned) with thousands of random other joints."""
     robot = jk.robots.load("ur5", dtype=np.float64)
-    qs = _uniform(robot, N_WRIST, SEED)
+    qs = sample_configurations(robot, N_WRIST, SEED)
     qs[:, 4] = 0.0
 
     def one(q):
@@ -135,7 +128,7 @@ def test_manipulability_gradient_matches_closed_form_toolbox_and_fd():
     robot = jk.robots.load("panda", dtype=np.float64)
     model = rtb.models.DH.Panda()
     model.tool = np.asarray(robot.tool)
-    qs = _uniform(robot, 3, 1)
+    qs = sample_configurations(robot, 3, 1)
     h = 1e-6
 
     @jax.jit(compiler_options=FAST_COMPILE)
@@ -236,7 +229,7 @@ def test_joint_torques_statics_and_power():
 )
 def test_wrist_decoupling_det_factorises(name):
     robot = jk.robots.load(name, dtype=np.float64)
-    qs = _uniform(robot, 20, 9)
+    qs = sample_configurations(robot, 20, 9)
     out = jax.jit(jax.vmap(lambda q: jk.wrist_decoupling(robot, q, 1e-6, check=False)))(
         jnp.asarray(qs)
     )

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import sample_configurations
 
 import jaxkin as jk
 from jaxkin import spatial
@@ -24,14 +25,6 @@ from jaxkin import spatial
 SIGMA_P = 1e-4  # m, per axis
 SIGMA_O = 1e-4  # rad, per axis
 M = 100
-
-
-def _uniform(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo = np.asarray(robot.lower, dtype=float)
-    hi = np.asarray(robot.upper, dtype=float)
-    lo = np.where(np.isfinite(lo), lo, -math.pi)
-    hi = np.where(np.isfinite(hi), hi, math.pi)
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
 
 
 def _measure(robot: jk.Robot, qs: np.ndarray, noise: np.ndarray | None) -> jax.Array:
@@ -69,7 +62,7 @@ def test_recovers_perturbed_niryo_one_parameters_from_noisy_poses():
     true = nominal.replace(
         params={**nominal.params, "xyz": jnp.asarray(xyz)}, offset=jnp.asarray(offset)
     )
-    qs = _uniform(nominal, M, 1)
+    qs = sample_configurations(nominal, M, 1)
     Ts = _measure(true, qs, rng.normal(size=(M, 6)))
 
     res = jk.calibrate(nominal, qs, Ts, masks, position_sigma=SIGMA_P, orientation_sigma=SIGMA_O)
@@ -101,7 +94,7 @@ def test_recovers_perturbed_niryo_one_parameters_from_noisy_poses():
 
 def test_identifiability_names_what_the_data_cannot_see():
     nominal = jk.robots.load("niryo_one", dtype=np.float64)
-    qs = _uniform(nominal, 30, 2)
+    qs = sample_configurations(nominal, 30, 2)
     masks = niryo_calibration_set()
     assert jk.identifiability(nominal, qs, masks).unidentifiable == []
     # joint 4's x offset and the forearm length both lie along joint 4's axis
@@ -125,7 +118,7 @@ def test_dh_parameters_and_base_recovered_exactly_without_noise():
         offset=jnp.array([0.0, -0.015]),
         base=jnp.asarray(base),
     )
-    qs = _uniform(nominal, 40, 3)
+    qs = sample_configurations(nominal, 40, 3)
     Ts = _measure(true, qs, None)
     params = {
         "a": np.array([True, True]),
