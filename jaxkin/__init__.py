@@ -61,6 +61,7 @@ from .representations import analytical_from_geometric as analytical_from_geomet
 from .representations import rate_matrix as rate_matrix
 from .representations import representation_margin as representation_margin
 from .urdf import load_urdf as load_urdf
+from .urdf_export import to_urdf as to_urdf
 from .velocity import classify_motion as classify_motion
 from .velocity import classify_twist as classify_twist
 from .velocity import point_velocity as point_velocity
