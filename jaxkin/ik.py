@@ -43,7 +43,7 @@ import numpy as np
 from . import spatial
 from ._jit import is_concrete, robot_jit
 from .errors import JaxkinError, ShapeError
-from .jacobians import geometric_jacobian
+from .jacobians import _geometric
 from .kinematics import check_q, forward_pass, joint_placements
 from .model import Robot
 
@@ -159,7 +159,8 @@ def _pose(robot: Robot, q: jax.Array, f: int) -> jax.Array:
 
 
 def _pose_and_jacobian(robot: Robot, q: jax.Array, f: int):
-    return _pose(robot, q, f), geometric_jacobian(robot, q, frame=f)
+    g = _geometric(robot, q, f, None, "world_aligned")  # one forward pass for both
+    return g.pose(), g.matrix()
 
 
 def _pose_residual(T: jax.Array, T_target: jax.Array) -> jax.Array:

@@ -143,11 +143,13 @@ def geometric_jacobian(
 
 class _Geometric(NamedTuple):
     """The geometric Jacobian of one frame, before assembly: columns as scalar 3-vectors (short
-    robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's R."""
+    robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's pose
+    (``R``, origin ``p``) from the same forward pass."""
 
     Jv: Any
     Jw: Any
     R: Any
+    p: Any
     dtype: Any
 
     def matrix(self) -> jax.Array:
@@ -173,6 +175,11 @@ class _Geometric(NamedTuple):
     def rotation(self) -> jax.Array:
         return fold.stack_matrix(self.R, self.dtype) if isinstance(self.R, tuple) else self.R
 
+    def pose(self) -> jax.Array:
+        """``T_world_frame`` (4, 4) of the frame (its origin, not ``point``)."""
+        p = fold.stack_matrix(self.p, self.dtype) if isinstance(self.p, tuple) else self.p
+        return spatial.make_transform(self.rotation(), p)
+
 
 def _geometric(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
     if uses_scan(robot):
@@ -189,7 +196,7 @@ def _geometric(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
     elif reference == "world":
         # velocity of the point at the world origin: v_target - omega x target
         Jv = [fold.vadd(v, fold.cross(target, w)) for v, w in zip(Jv, Jw, strict=True)]
-    return _Geometric(Jv=Jv, Jw=Jw, R=R, dtype=sp.dtype)
+    return _Geometric(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
 
 
 def _geometric_scan(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
@@ -214,7 +221,7 @@ def _geometric_scan(robot: Robot, q, f: int, point, reference: str) -> _Geometri
         Jv, Jw = R.T @ Jv, R.T @ Jw
     elif reference == "world":
         Jv = Jv + spatial.skew(target) @ Jw
-    return _Geometric(Jv=Jv, Jw=Jw, R=R, dtype=dtype)
+    return _Geometric(Jv=Jv, Jw=Jw, R=R, p=p, dtype=dtype)
 
 
 def change_reference(

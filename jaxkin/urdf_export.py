@@ -55,8 +55,9 @@ def _transform(R: np.ndarray | None, p: np.ndarray | None) -> np.ndarray:
 
 def _rpy(R: np.ndarray) -> tuple[float, float, float]:
     """URDF (roll, pitch, yaw) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``, stable at pitch = +-pi/2:
-    yaw first, then roll and pitch from ``Rz(-yaw) R = Ry(pitch) Rx(roll)`` (whose second row is
-    ``[0, cos(roll), -sin(roll)]`` and first column ``[cos(pitch), 0, -sin(pitch)]`` for any yaw)."""
+    yaw first, then roll and pitch from ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose second row is
+    ``[0, cos(roll), -sin(roll)]`` and first column ``[cos(pitch), 0, -sin(pitch)]`` for any
+    yaw."""
     yaw = math.atan2(R[1, 0], R[0, 0])
     M = _rot(np.array([0.0, 0.0, 1.0]), -yaw) @ R
     return math.atan2(-M[1, 2], M[1, 1]), math.atan2(-M[2, 0], M[0, 0]), yaw
@@ -136,8 +137,8 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
         if i not in leader:
             raise ModelError(
                 f"to_urdf: joint {name!r} is driven with multiplier "
-                f"{float(mult[robot.q_index.index(i)])!r}; URDF can scale only mimic joints. Build the "
-                "robot with multiplier 1 (scale q instead)."
+                f"{float(mult[robot.q_index.index(i)])!r}; URDF can scale only mimic joints. "
+                "Build the robot with multiplier 1 (scale q instead)."
             )
 
     lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>"]
