@@ -35,7 +35,7 @@ import numpy as np
 from . import spatial
 from ._jit import is_concrete, robot_jit
 from .errors import JaxkinError, ShapeError
-from .ik import _pose_residual
+from .ik import _default_optimizer, _pose_residual
 from .kinematics import forward_pass
 from .model import Robot
 
@@ -306,7 +306,10 @@ def _fit_impl(robot, qs, Ts, wp, wo, tol, *, masks_key, f, optimizer, max_steps)
         r = _pose_residuals(_apply(robot, masks, theta), qs, Ts, f, wp, wo)
         return jnp.sum(r * r) / M
 
-    vg = optax.value_and_grad_from_state(loss)
+    # Not optax.value_and_grad_from_state with the line search's store_grad=True: optax transposes
+    # its linearisation with a Python-float cotangent (float64 under x64), which a float32 loss
+    # rejects with a TypeError.
+    vg = jax.value_and_grad(loss)
     theta0 = jnp.zeros(P, dtype)
     history0 = jnp.full((max_steps,), jnp.nan, dtype)
 
@@ -316,7 +319,7 @@ def _fit_impl(robot, qs, Ts, wp, wo, tol, *, masks_key, f, optimizer, max_steps)
 
     def body(c):
         theta, state, k, hist, v_prev, _ = c
-        v, g = vg(theta, state=state)
+        v, g = vg(theta)
         hist = hist.at[jnp.maximum(k - 1, 0)].set(jnp.where(k > 0, v, hist[0]))
         updates, state = optimizer.update(g, state, theta, value=v, grad=g, value_fn=loss)
         theta = optax.apply_updates(theta, updates)
@@ -459,19 +462,6 @@ def calibrate(
         rms_orientation_before=before[1],
         rms_orientation_after=after[1],
     )
-
-
-_DEFAULT_OPTIMIZER: list = []
-
-
-def _default_optimizer():
-    # One object, so that repeated calls hit jit's cache (optimisers hash by identity).
-    if not _DEFAULT_OPTIMIZER:
-        import optax
-
-        ls = optax.scale_by_backtracking_linesearch(max_backtracking_steps=20, store_grad=True)
-        _DEFAULT_OPTIMIZER.append(optax.lbfgs(linesearch=ls))
-    return _DEFAULT_OPTIMIZER[0]
 
 
 class _HashableMask:

@@ -178,6 +178,9 @@ def test_float32():
     assert float(jnp.mean(sol.converged)) >= 0.95  # default tol 1e-5 in float32
     ok = np.asarray(sol.converged)
     assert np.all(np.asarray(sol.residual)[ok] <= 1e-5)
+    # the optax path in float32 (with x64 on: no float64 cotangent may leak into the loss)
+    sol = jk.solve_ik(robot, T[:4], q_star[:4] + 0.05, method="optax", tol=1e-4, throw=False)
+    assert sol.q.dtype == jnp.float32 and np.all(np.asarray(sol.converged))
 
 
 def test_errors(ur5):
