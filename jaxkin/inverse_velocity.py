@@ -36,7 +36,7 @@ import numpy as np
 from . import spatial
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .jacobians import geometric_jacobian
+from .jacobians import _geometric
 from .kinematics import check_q, forward_pass
 from .model import Robot
 
@@ -335,11 +335,13 @@ def _resolved_rate_impl(robot, q0, Ts, Vs, dt, gain, damping, *, frame, rcond, c
     lo = robot.lower.astype(dtype)
     hi = robot.upper.astype(dtype)
 
+    if Vs is None:
+        Vs = _path_twists(Ts, dt)
+
     def step(q, x):
         Td, Vd, Td_next = x
-        J = geometric_jacobian(robot, q, frame=frame)
-        fp = forward_pass(robot, q)
-        T = spatial.make_transform(fp.R[frame], fp.p[frame])
+        g = _geometric(robot, q, frame, None, "world_aligned")  # J and pose from one pass
+        J, T = g.matrix(), g.pose()
         V = Vd + gain * pose_error(T, Td)
         if rcond is None:
             qd = _dls_solve(J, V, damping * damping)
@@ -413,7 +415,7 @@ def resolved_rate_control(
         raise JaxkinError(f"{fn}: give either damping= or rcond=, not both.")
     dt_a = jnp.asarray(dt, dtype=dtype)
     if twists is None:
-        Vs = _path_twists(Ts, dt_a)
+        Vs = None  # from the path, inside the jitted loop
     else:
         Vs = jnp.asarray(twists, dtype=dtype)
         if Vs.shape != (Ts.shape[0], 6):
