@@ -256,6 +256,12 @@ def identifiability(
     """
     masks = _masks(robot, params)
     f = robot.frame_index(frame)
+    if not is_concrete((robot, qs)):
+        raise JaxkinError(
+            "jk.identifiability works on concrete data (it returns Python lists): call it outside "
+            "jit/vmap/grad. jk.calibrate calls it unless check_identifiable=False; inside a "
+            "transformation pass check_identifiable=False and check once outside."
+        )
     qs = jnp.asarray(qs)
     if qs.ndim != 2 or qs.shape[1] != robot.dof:
         raise ShapeError(

@@ -148,3 +148,22 @@ def test_errors():
         jk.calibrate(robot, qs, Ts, {"a": np.ones(3, bool)})
     with pytest.raises(jk.JaxkinError, match="no tool"):
         jk.calibrate(robot, qs, Ts, ["tool"])
+
+
+def test_batched_over_datasets_with_vmap():
+    nominal = jk.robots.load("two_link_planar", dtype=np.float64)
+    true_a = np.asarray(nominal.params["a"])[None] * np.array([[1.01, 0.99], [0.98, 1.02]])
+    qs = np.stack([sample_configurations(nominal, 20, k) for k in (4, 5)])
+    Ts = jnp.stack(
+        [
+            _measure(nominal.replace(params={**nominal.params, "a": jnp.asarray(a)}), q, None)
+            for a, q in zip(true_a, qs, strict=True)
+        ]
+    )
+    free = {"a": np.array([True, True])}
+    fitted = jax.vmap(
+        lambda q, T: jk.calibrate(nominal, q, T, free, check_identifiable=False).params["a"]
+    )(jnp.asarray(qs), Ts)
+    np.testing.assert_allclose(np.asarray(fitted), true_a, rtol=0, atol=1e-9)
+    with pytest.raises(jk.JaxkinError, match="check_identifiable=False"):
+        jax.vmap(lambda q, T: jk.calibrate(nominal, q, T, free).params["a"])(jnp.asarray(qs), Ts)
