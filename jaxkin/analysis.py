@@ -460,11 +460,12 @@ def wrist_centre(robot: Robot, q: Any, wrist_joints: Sequence[int | str] | None 
     fn = "jk.wrist_centre"
     _, _, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
-    return _wrist_centre(robot, q, wrist_model)
+    return _wrist_centre(forward_pass(robot, q), wrist_model)
 
 
-def _wrist_centre(robot, q, wrist_model):
-    fp = forward_pass(robot, q)
+def _wrist_centre(fp, wrist_model):
+    """Least-squares intersection of the wrist axes of forward pass ``fp``, and the largest
+    distance of an axis from it."""
     dtype = fp.p.dtype
     eye = jnp.eye(3, dtype=dtype)
     A = jnp.zeros((3, 3), dtype=dtype)
@@ -517,9 +518,9 @@ def wrist_decoupling(
     arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
     J = geometric_jacobian(robot, q, frame=frame)
-    T = forward_pass(robot, q)
-    p = T.p[robot.frame_index(frame)]
-    c, dist = _wrist_centre(robot, q, wrist_model)
+    fp = forward_pass(robot, q)  # joint axes and origins, shared with the wrist centre
+    p = fp.p[robot.frame_index(frame)]
+    c, dist = _wrist_centre(fp, wrist_model)
     r = c - p
     Jv_c = J[:3] + jnp.cross(J[3:].T, r).T  # omega x r per column
     J11 = Jv_c[:, jnp.array(arm)]
