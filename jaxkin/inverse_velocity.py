@@ -35,6 +35,7 @@ import numpy as np
 
 from . import spatial
 from ._jit import robot_jit
+from .analysis import _check_J
 from .errors import JaxkinError, ShapeError
 from .jacobians import _geometric
 from .kinematics import check_q, forward_pass
@@ -54,13 +55,8 @@ __all__ = [
 
 # ----------------------------------------------------------------------------- validation
 def _check_Jv(J: Any, v: Any, fn: str) -> tuple[jax.Array, jax.Array]:
-    Js = getattr(J, "shape", None)
-    if Js is None:
-        J = np.asarray(J, dtype=float)
-        Js = J.shape
-    if len(Js) != 2:
-        hint = " For a batch use jax.vmap." if len(Js) == 3 else ""
-        raise ShapeError(f"{fn}: J must have shape (m, dof), got {tuple(Js)}.{hint}")
+    J = _check_J(J, fn)
+    Js = J.shape
     vs = getattr(v, "shape", None)
     if vs is None:
         v = np.asarray(v, dtype=float)
@@ -70,9 +66,6 @@ def _check_Jv(J: Any, v: Any, fn: str) -> tuple[jax.Array, jax.Array]:
             f"{fn}: v must have shape ({Js[0]},) to match J's {Js[0]} rows (a twist [v; omega] "
             f"for a geometric Jacobian), got {tuple(vs)}. Batch with jax.vmap."
         )
-    J = jnp.asarray(J)
-    if not jnp.issubdtype(J.dtype, jnp.floating):
-        J = J.astype(jnp.result_type(float))
     v = jnp.asarray(v)
     dtype = jnp.result_type(J.dtype, v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else J.dtype)
     return J.astype(dtype), v.astype(dtype)
