@@ -1,18 +1,19 @@
 """Inverse-kinematics benchmark: 1,000 random reachable Panda targets, four solvers, same seeds.
 
-Targets: ``fk`` of 1,000 configurations drawn uniformly within the Panda's joint limits (fixed
-seed), the Franka Hand TCP as the tip (the zoo's ``panda``). Starts: ``S`` configurations drawn
-uniformly within the limits (fixed seed), *the same for every solver and every target*: the
-first is the start of the single-start run (``S = 1``), all of them the starts of the multi-start
-run, tried in order (the LM solvers, Pinocchio) or all at once (pytorch_kinematics).
+Targets: ``fk`` of 1,000 configurations drawn uniformly within the Panda's joint limits by
+``jk.sample_configurations`` (fixed key), the Franka Hand TCP as the tip (the zoo's ``panda``).
+Starts: ``S`` configurations drawn the same way (another fixed key), *the same for every solver
+and every target*: the first is the start of the single-start run (``S = 1``), all of them the
+starts of the multi-start run, tried in order (the LM solvers, Pinocchio) or all at once
+(pytorch_kinematics).
 
 Solvers (all float64, CPU):
 
 * **jaxkin** ``jk.solve_ik(robot, T, q0=seeds[0], seeds=seeds[1:])``: Levenberg-Marquardt, all
   targets in one jitted call; the first call (trace + compile + run) and the steady state
   (median of repeats) are timed apart;
-* **Pinocchio**: the damped-least-squares loop of its documentation example
-  (``examples/inverse-kinematics.py``: ``log6`` error in the frame, ``Jlog6``, ``DT = 0.1``,
+* **Pinocchio**: the damped-least-squares loop of its documentation example (Pinocchio's
+  ``examples/inverse-kinematics.py``: ``log6`` error in the frame, ``Jlog6``, ``DT = 0.1``,
   ``damp = 1e-12``, ``IT_MAX = 1000``), with ``eps`` tightened from 1e-4 to 1e-10 so that it can
   meet the 1e-9 criterion, one target at a time in Python; a start whose answer leaves the joint
   limits (the example ignores them) counts as failed and the next start is tried;
@@ -24,10 +25,13 @@ Solvers (all float64, CPU):
 
 Every answer is judged the same way, with jaxkin's float64 forward kinematics (checked against
 Pinocchio and the Robotics Toolbox at start-up): *success* = position error <= 1e-9 m and
-orientation error <= 1e-9 rad (ORACLES.md: converged IK pose) and every joint within its limits;
-the loose column uses 1e-6. The Pinocchio model and the pytorch_kinematics chain come from one
-URDF that ``jk.to_urdf`` writes from the zoo's modified-DH Panda; the toolbox's
-``models.DH.Panda`` has the same table (tests/test_oracle_rtb.py) and gets the zoo's tool.
+orientation error <= 1e-9 rad (the converged-pose criterion of tests/test_ik.py) and every joint
+within its limits; the loose column uses 1e-6. The Pinocchio model and the pytorch_kinematics
+chain come from one URDF that ``jk.to_urdf`` writes from the zoo's modified-DH Panda; the
+toolbox's ``models.DH.Panda`` has the same table (tests/test_oracle_rtb.py) and gets the zoo's
+tool.
+
+This module measures; :mod:`bench.ik_report` writes the table.
 
 Usage: ``python3 -m bench.ik [--n N] [--seeds S] [--quick] [--out PATH]``; writes
 ``bench/results/ik.json`` and prints a markdown table.
@@ -36,14 +40,12 @@ Usage: ``python3 -m bench.ik [--n N] [--seeds S] [--quick] [--out PATH]``; write
 from __future__ import annotations
 
 import argparse
-import datetime
 import gc
-import json
 import os
-import platform
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -53,21 +55,13 @@ import numpy as np
 
 import jaxkin as jk
 
-RESULTS_DIR = Path(__file__).resolve().parent / "results"
+from .ik_report import results_table
+from .report import RESULTS_DIR, first_and_repeats, log, machine_info, utc_now, write_json
+
 TARGET_SEED = 2024
 START_SEED = 7
 TOL = 1e-9
 LOOSE = 1e-6
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-# ----------------------------------------------------------------------------- models
-def sample_within_limits(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    lo, hi = np.asarray(robot.lower, dtype=np.float64), np.asarray(robot.upper, dtype=np.float64)
-    return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
 
 
 # ----------------------------------------------------------------------------- judge
@@ -111,22 +105,39 @@ def run_jaxkin(robot, Ts, seeds, repeats: int) -> dict[str, Any]:
         jax.block_until_ready(sol)
         return sol
 
-    t0 = time.perf_counter()
-    sol = solve()
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        sol = solve()
-        times.append(time.perf_counter() - t0)
+    timing = first_and_repeats(solve, repeats)
+    sol = timing.pop("result")
     return dict(
         q=np.asarray(sol.q),
         own_converged=float(np.mean(np.asarray(sol.converged))),
-        first_call_s=first,
-        steady_s=float(np.median(times)),
-        steady_min_s=float(np.min(times)),
-        samples_s=times,
+        **timing,
         how="jk.solve_ik (LM, lax.while_loop, 64+ lanes), defaults",
+    )
+
+
+def one_target_at_a_time(
+    Ts: np.ndarray,
+    dof: int,
+    solve: Callable[[np.ndarray], tuple[np.ndarray, bool]],
+    budget_s: float,
+) -> dict[str, Any]:
+    """``solve(T) -> (q, own success flag)`` for each target in turn, until the targets or
+    ``budget_s`` run out; the total time is extrapolated to every target."""
+    qs = np.full((len(Ts), dof), np.nan)
+    own = np.zeros(len(Ts), bool)
+    t0 = time.perf_counter()
+    done = 0
+    for k, T in enumerate(Ts):
+        qs[k], own[k] = solve(T)
+        done = k + 1
+        if time.perf_counter() - t0 > budget_s:
+            break
+    elapsed = time.perf_counter() - t0
+    return dict(
+        q=qs,
+        own_converged=float(own[:done].mean()),
+        total_s=elapsed * len(Ts) / done,
+        measured_targets=done,
     )
 
 
@@ -136,41 +147,35 @@ def run_pinocchio(model, fid, Ts, seeds, lo, hi, time_budget_s: float) -> dict[s
 
     data = model.createData()
     eps, it_max, dt, damp = 1e-10, 1000, 1e-1, 1e-12
-    qs = np.full((len(Ts), model.nq), np.nan)
-    own = np.zeros(len(Ts), bool)
     iterations = 0
-    t0 = time.perf_counter()
-    done = 0
-    for k, T in enumerate(Ts):
+
+    def dls(oMdes, q_start: np.ndarray) -> tuple[np.ndarray, bool]:
+        nonlocal iterations
+        q = q_start.copy()
+        for _ in range(it_max):
+            pin.framesForwardKinematics(model, data, q)
+            iMd = data.oMf[fid].actInv(oMdes)
+            err = pin.log(iMd).vector
+            if np.linalg.norm(err) < eps:
+                return q, True
+            J = pin.computeFrameJacobian(model, data, q, fid)  # LOCAL
+            J = -np.dot(pin.Jlog6(iMd.inverse()), J)
+            v = -J.T.dot(np.linalg.solve(J.dot(J.T) + damp * np.eye(6), err))
+            q = pin.integrate(model, q, v * dt)
+            iterations += 1
+        return q, False
+
+    def solve(T: np.ndarray) -> tuple[np.ndarray, bool]:
         oMdes = pin.SE3(T[:3, :3].copy(), T[:3, 3].copy())
         for q_start in seeds:
-            q = q_start.copy()
-            success = False
-            for _ in range(it_max):
-                pin.framesForwardKinematics(model, data, q)
-                iMd = data.oMf[fid].actInv(oMdes)
-                err = pin.log(iMd).vector
-                if np.linalg.norm(err) < eps:
-                    success = True
-                    break
-                J = pin.computeFrameJacobian(model, data, q, fid)  # LOCAL
-                J = -np.dot(pin.Jlog6(iMd.inverse()), J)
-                v = -J.T.dot(np.linalg.solve(J.dot(J.T) + damp * np.eye(6), err))
-                q = pin.integrate(model, q, v * dt)
-                iterations += 1
-            qs[k] = q
+            q, success = dls(oMdes, q_start)
             if success and np.all((q >= lo) & (q <= hi)):
-                own[k] = True
-                break
-        done = k + 1
-        if time.perf_counter() - t0 > time_budget_s:
-            break
-    elapsed = time.perf_counter() - t0
+                return q, True
+        return q, False
+
+    out = one_target_at_a_time(Ts, model.nq, solve, time_budget_s)
     return dict(
-        q=qs,
-        own_converged=float(own[:done].mean()),
-        total_s=elapsed * len(Ts) / done,
-        measured_targets=done,
+        **out,
         iterations=iterations,
         how="Pinocchio docs DLS loop (log6, Jlog6, DT=0.1, damp=1e-12, IT_MAX=1000), eps=1e-10",
     )
@@ -178,33 +183,32 @@ def run_pinocchio(model, fid, Ts, seeds, lo, hi, time_budget_s: float) -> dict[s
 
 def run_rtb(rtb_robot, Ts, seeds, time_budget_s: float) -> dict[str, Any]:
     ets = rtb_robot.ets()
-    qs = np.full((len(Ts), len(seeds[0])), np.nan)
-    own = np.zeros(len(Ts), bool)
-    t0 = time.perf_counter()
-    done = 0
-    for k, T in enumerate(Ts):
+
+    def solve(T: np.ndarray) -> tuple[np.ndarray, bool]:
         sol = ets.ikine_LM(T, q0=seeds, slimit=len(seeds), ilimit=100, tol=1e-20, joint_limits=True)
-        qs[k] = sol.q
-        own[k] = bool(sol.success)
-        done = k + 1
-        if time.perf_counter() - t0 > time_budget_s:
-            break
-    elapsed = time.perf_counter() - t0
+        return sol.q, bool(sol.success)
+
+    out = one_target_at_a_time(Ts, len(seeds[0]), solve, time_budget_s)
     return dict(
-        q=qs,
-        own_converged=float(own[:done].mean()),
-        total_s=elapsed * len(Ts) / done,
-        measured_targets=done,
+        **out,
         how="ets.ikine_LM(q0=seeds, slimit=S, ilimit=100, tol=1e-20, joint_limits=True)",
     )
+
+
+def pk_chain(urdf: str):
+    """The float64 pytorch_kinematics chain of ``urdf`` to its ``tool`` link."""
+    import pytorch_kinematics as pk
+    import torch
+
+    chain = pk.build_serial_chain_from_urdf(urdf.encode(), end_link_name="tool")
+    return chain.to(dtype=torch.float64)
 
 
 def run_pk(urdf: str, Ts, seeds, lo, hi) -> dict[str, Any]:
     import pytorch_kinematics as pk
     import torch
 
-    chain = pk.build_serial_chain_from_urdf(urdf.encode(), end_link_name="tool")
-    chain = chain.to(dtype=torch.float64)
+    chain = pk_chain(urdf)
     limits = torch.tensor(np.stack([lo, hi], 1), dtype=torch.float64)
     ik = pk.PseudoInverseIK(
         chain,
@@ -232,7 +236,7 @@ def run_pk(urdf: str, Ts, seeds, lo, hi) -> dict[str, Any]:
     )
 
 
-# ----------------------------------------------------------------------------- checks, info
+# ----------------------------------------------------------------------------- checks
 def check_models(robot, pin_model, fid, rtb_robot, urdf, qs) -> dict[str, float]:
     """Largest fk difference of each peer's model from jaxkin's, over ``qs``."""
     import pinocchio as pin
@@ -249,82 +253,17 @@ def check_models(robot, pin_model, fid, rtb_robot, urdf, qs) -> dict[str, float]
         float(np.abs(rtb_robot.fkine(q).A - T).max()) for q, T in zip(qs, T_jk, strict=True)
     )
     try:
-        import pytorch_kinematics as pk
         import torch
 
-        chain = pk.build_serial_chain_from_urdf(urdf.encode(), end_link_name="tool")
-        chain = chain.to(dtype=torch.float64)
-        m = chain.forward_kinematics(torch.tensor(qs)).get_matrix().numpy()
+        m = pk_chain(urdf).forward_kinematics(torch.tensor(qs)).get_matrix().numpy()
         out["pytorch_kinematics"] = float(np.abs(m - T_jk).max())
     except ImportError:
         pass
     return out
 
 
-def _version(mod: str) -> str | None:
-    try:
-        from importlib.metadata import version
-
-        return version(mod)
-    except Exception:
-        return None
-
-
-def machine_info() -> dict[str, Any]:
-    cpu = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return dict(
-        cpu=cpu,
-        cores=os.cpu_count(),
-        python=platform.python_version(),
-        platform=platform.platform(),
-        versions={
-            m: _version(m)
-            for m in (
-                "jax",
-                "jaxlib",
-                "numpy",
-                "optax",
-                "pin",
-                "roboticstoolbox-python",
-                "torch",
-                "pytorch-kinematics",
-            )
-        },
-        jaxkin=jk.__version__,
-        jax_devices=[str(d) for d in jax.devices()],
-    )
-
-
-def markdown(rows: list[dict[str, Any]]) -> str:
-    out = [
-        "| starts | solver | success (1e-9, in limits) | success (1e-6) | own flag | total time "
-        "[s] | first call [s] |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        first = f"{r['first_call_s']:.2f}" if r.get("first_call_s") is not None else "-"
-        note = (
-            ""
-            if r.get("measured_targets", r["n"]) >= r["n"]
-            else f" (extrapolated from {r['measured_targets']})"
-        )
-        out.append(
-            f"| {r['starts']} | {r['solver']} | {100 * r['success']:.1f}% | "
-            f"{100 * r['success_loose']:.1f}% | {100 * r['own_converged']:.1f}% | "
-            f"{r['total_s']:.3f}{note} | {first} |"
-        )
-    return "\n".join(out)
-
-
-def main(argv: list[str] | None = None) -> int:
+# ----------------------------------------------------------------------------- main
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1000)
     ap.add_argument("--seeds", type=int, default=16)
@@ -340,73 +279,112 @@ def main(argv: list[str] | None = None) -> int:
         help="JAX persistent compilation cache directory (a second run then loads the compiled "
         "solver instead of compiling it: its first call shows the cost in a new process)",
     )
-    args = ap.parse_args(argv)
-    if args.quick:
-        args.n, args.budget = 100, 20.0
+    return ap
+
+
+def _configure_jax(cache: Path | None) -> None:
     jax.config.update("jax_enable_x64", True)
-    if args.cache is not None:
-        jax.config.update("jax_compilation_cache_dir", str(args.cache))
+    if cache is not None:
+        jax.config.update("jax_compilation_cache_dir", str(cache))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    warnings.simplefilter("ignore", DeprecationWarning)
-    gc.disable()
 
-    robot = jk.robots.load("panda", dtype=np.float64)
-    q_star = sample_within_limits(robot, args.n, TARGET_SEED)
-    seeds = sample_within_limits(robot, args.seeds, START_SEED)
-    Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(q_star)))
-    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
-    urdf = jk.to_urdf(robot)
 
+def solve_all(problem: dict[str, Any], starts: np.ndarray, args) -> dict[str, dict[str, Any]]:
+    """Every solver not in ``args.skip`` on every target from ``starts``."""
+    p = problem
+    S = len(starts)
+    results = {}
+    log(f"S = {S}: jaxkin")
+    results["jaxkin"] = run_jaxkin(p["robot"], p["Ts"], starts, args.repeats)
+    if "pk" not in args.skip:
+        log(f"S = {S}: pytorch_kinematics")
+        results["pytorch_kinematics"] = run_pk(p["urdf"], p["Ts"], starts, p["lo"], p["hi"])
+    if "rtb" not in args.skip:
+        log(f"S = {S}: Robotics Toolbox")
+        results["robotics_toolbox"] = run_rtb(p["rtb_robot"], p["Ts"], starts, args.budget)
+    if "pinocchio" not in args.skip:
+        log(f"S = {S}: Pinocchio")
+        results["pinocchio"] = run_pinocchio(
+            p["pin_model"], p["fid"], p["Ts"], starts, p["lo"], p["hi"], args.budget
+        )
+    return results
+
+
+def judge_rows(problem: dict[str, Any], S: int, n: int, results: dict) -> list[dict[str, Any]]:
+    """One row per solver: its answers judged, its times and its own report."""
+    rows = []
+    for name, res in results.items():
+        q = res.pop("q")
+        measured = res.get("measured_targets", n)
+        verdict = Judge(problem["robot"], problem["Ts"][:measured])(q[:measured])
+        total = res.pop("total_s", None) or res["steady_s"]
+        rows.append(dict(solver=name, starts=S, n=n, total_s=total, **verdict, **res))
+        log(f"  {name}: {verdict['success']:.3f} success, {total:.3f} s")
+    return rows
+
+
+def setup(n: int, n_seeds: int) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+    """The robot, its targets and every peer's model (``problem``), the starts, and the
+    configurations of the targets."""
     import pinocchio as pin
     import roboticstoolbox as rtb
 
+    robot = jk.robots.load("panda", dtype=np.float64)
+    q_star = np.asarray(jk.sample_configurations(robot, n, TARGET_SEED))
+    seeds = np.asarray(jk.sample_configurations(robot, n_seeds, START_SEED))
+    Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(q_star)))
+    urdf = jk.to_urdf(robot)
     pin_model = pin.buildModelFromXML(urdf)
-    fid = pin_model.getFrameId("tool")
     rtb_robot = rtb.models.DH.Panda()
     rtb_robot.tool = np.asarray(robot.tool)
+    problem = dict(
+        robot=robot,
+        Ts=Ts,
+        lo=np.asarray(robot.lower),
+        hi=np.asarray(robot.upper),
+        urdf=urdf,
+        pin_model=pin_model,
+        fid=pin_model.getFrameId("tool"),
+        rtb_robot=rtb_robot,
+    )
+    return problem, seeds, q_star
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.quick:
+        args.n, args.budget = 100, 20.0
+    _configure_jax(args.cache)
+    warnings.simplefilter("ignore", DeprecationWarning)
+    gc.disable()
+
+    problem, seeds, q_star = setup(args.n, args.seeds)
+    p = problem
+    fk_diff = check_models(
+        p["robot"], p["pin_model"], p["fid"], p["rtb_robot"], p["urdf"], q_star[:20]
+    )
     info = dict(
         benchmark="ik",
-        date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        date=utc_now(),
         n_targets=args.n,
         starts=args.seeds,
         compilation_cache=str(args.cache) if args.cache else None,
         criteria=dict(position_m=TOL, orientation_rad=TOL, loose=LOOSE, within_limits=True),
-        model_fk_max_abs_diff=check_models(robot, pin_model, fid, rtb_robot, urdf, q_star[:20]),
+        model_fk_max_abs_diff=fk_diff,
         machine=machine_info(),
         load_average_before=os.getloadavg(),
     )
-    _log(f"models agree with jaxkin to {info['model_fk_max_abs_diff']}")
+    log(f"models agree with jaxkin to {info['model_fk_max_abs_diff']}")
     rows = []
     for S in sorted({1, args.seeds}):
-        starts = seeds[:S]
-        results = {}
-        _log(f"S = {S}: jaxkin")
-        results["jaxkin"] = run_jaxkin(robot, Ts, starts, args.repeats)
-        if "pk" not in args.skip:
-            _log(f"S = {S}: pytorch_kinematics")
-            results["pytorch_kinematics"] = run_pk(urdf, Ts, starts, lo, hi)
-        if "rtb" not in args.skip:
-            _log(f"S = {S}: Robotics Toolbox")
-            results["robotics_toolbox"] = run_rtb(rtb_robot, Ts, starts, args.budget)
-        if "pinocchio" not in args.skip:
-            _log(f"S = {S}: Pinocchio")
-            results["pinocchio"] = run_pinocchio(pin_model, fid, Ts, starts, lo, hi, args.budget)
-        for name, res in results.items():
-            q = res.pop("q")
-            measured = res.get("measured_targets", args.n)
-            verdict = Judge(robot, Ts[:measured])(q[:measured])
-            total = res.pop("total_s", None) or res["steady_s"]
-            row = dict(solver=name, starts=S, n=args.n, total_s=total, **verdict, **res)
-            rows.append(row)
-            _log(f"  {name}: {verdict['success']:.3f} success, {total:.3f} s")
+        rows += judge_rows(problem, S, args.n, solve_all(problem, seeds[:S], args))
     info["load_average_after"] = os.getloadavg()
     info["rows"] = rows
     out = args.out or RESULTS_DIR / ("ik_quick.json" if args.quick else "ik.json")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(info, indent=1, default=float))
-    print(markdown(rows))
-    _log(f"wrote {out}")
+    write_json(out, info)
+    print(results_table(rows))
+    log(f"wrote {out}")
     return 0
 
 

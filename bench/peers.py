@@ -1,12 +1,13 @@
 """Robots and peer adapters for the benchmark: the same URDF for jaxkin and every peer.
 
-Robots (:func:`robot_sources`): example-robot-data's Panda (``panda.urdf``, tip ``panda_hand_tcp``,
-fingers removed) and UR5 (``ur5_robot.urdf``, tip ``tool0``), and a generated serial chain of
-:data:`CHAIN_JOINTS` revolute joints (:func:`chain_urdf`). Visual and collision elements are
+Robots (:func:`robot_sources`): example-robot-data's Panda (``erd/panda``: ``panda.urdf``, tip
+``panda_hand_tcp``, fingers removed) and UR5 (``erd/ur5_robot``: ``ur5_robot.urdf``, tip
+``tool0``), found by ``jaxkin.robots.example_robot_data``, and a serial chain of
+:data:`CHAIN_JOINTS` revolute joints built with ``jk.Robot.from_joints`` (:func:`chain_robot`)
+and written as URDF by ``jk.to_urdf``. Visual, collision, transmission and gazebo elements are
 stripped (kinematics only; no mesh is ever opened); everything else is the file as shipped.
 
-jaxkin builds each robot with ``jk.load_urdf(text, tip=...)`` when jaxkin has it, else with
-``jk.Robot.from_joints`` from the very numbers of the URDF (:func:`joint_specs`).
+jaxkin builds each robot from that URDF text with ``jk.load_urdf(text, tip=...)``.
 
 Peers, each verified numerically against jaxkin before it is timed (same frame, same quantity):
 
@@ -16,8 +17,10 @@ Peers, each verified numerically against jaxkin before it is timed (same frame, 
   and ``getFrameVelocity(..., LOCAL_WORLD_ALIGNED)``.
 * :class:`TorchKinematics`: ``pytorch_kinematics.build_serial_chain_from_urdf`` and
   ``chain.jacobian(th)``, batched, float32 and float64 CPU tensors.
-* :class:`MujocoLoop`: the URDF with ``<mujoco><compiler fusestatic="false" .../></mujoco>``;
-  per configuration ``mj_kinematics``, ``mj_comPos``, ``mj_jac`` at the tip body's origin.
+* :class:`MujocoLoop`: the URDF with :data:`MUJOCO_COMPILER` inserted (as in
+  tests/test_urdf_mujoco.py, plus lower bounds on mass and inertia for links without an
+  ``<inertial>``, e.g. the generated chain's); per configuration ``mj_kinematics``,
+  ``mj_comPos``, ``mj_jac`` at the tip body's origin.
 * :class:`MujocoBatch`: ``mujoco.batch.Batch`` (MuJoCo >= 4, its own thread pool): either
   ``forward(mjSTAGE_POS)`` then ``jac(body, xpos)`` (world-aligned at the body origin, as
   the others; the API takes world points, so the kinematics runs twice), or ``jac(body, 0)``
@@ -25,7 +28,7 @@ Peers, each verified numerically against jaxkin before it is timed (same frame, 
   ``reference="world"`` (Pinocchio WORLD), checked against that.
 * :class:`RoboticsToolbox`: ``rtb.Robot.URDF(file).ets(end=tip)`` and ``ets.jacob0(q)`` per
   configuration, only when every moving axis of the chain is exactly axis-aligned (its URDF
-  path is wrong otherwise; see /work/shared/ORACLES.md).
+  import gets other axes, such as ``0 1 6.12e-17``, wrong).
 """
 
 from __future__ import annotations
@@ -35,8 +38,6 @@ import copy
 import io
 import math
 import os
-import site
-import sys
 import tempfile
 import time
 import warnings
@@ -48,29 +49,11 @@ from typing import Any
 import numpy as np
 
 import jaxkin as jk
+from jaxkin.robots import example_robot_data
 
 CHAIN_JOINTS = 32
 
 # ---------------------------------------------------------------------------- URDF sources
-
-
-def find_example_robot_data(rel: str) -> Path:
-    """The path of an example-robot-data file, offline (the cmeel wheel has no Python module)."""
-    try:  # older wheels ship a Python loader
-        import example_robot_data  # type: ignore[import-not-found]
-
-        return Path(example_robot_data.getModelPath(rel)) / rel
-    except Exception:
-        pass
-    roots = [*site.getsitepackages(), site.getusersitepackages(), *sys.path]
-    for root in roots:
-        p = Path(root) / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / rel
-        if p.is_file():
-            return p
-    raise FileNotFoundError(
-        f"example-robot-data's {rel} was not found under any site-packages cmeel.prefix; "
-        "install it with `pip install example-robot-data`."
-    )
 
 
 def strip_urdf(text: str) -> str:
@@ -87,44 +70,34 @@ def strip_urdf(text: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def chain_urdf(n: int = CHAIN_JOINTS) -> str:
-    """A serial chain of ``n`` revolute joints: axes cycling z, y, x (exactly axis-aligned, so
-    every peer can load it), link offsets of 6 - 9 cm with small lateral parts, a twist
-    (``rpy``) on every other joint, limits +-pi, unit-ish inertias (MuJoCo needs them), and a
-    fixed tool frame ``tip`` 5 cm past the last joint."""
-    axes = ("0 0 1", "0 1 0", "1 0 0")
-    out = [f'<robot name="chain{n}">']
+def erd_urdf(name: str) -> str:
+    """The stripped URDF text of the example-robot-data robot ``name`` (``"erd/..."``)."""
+    return strip_urdf(example_robot_data.path(name).read_text())
 
-    def link(name: str) -> None:
-        out.append(
-            f'  <link name="{name}"><inertial><origin xyz="0 0 0.03" rpy="0 0 0"/>'
-            '<mass value="0.5"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" '
-            'iyz="0"/></inertial></link>'
-        )
 
-    link("base")
-    parent = "base"
+def chain_robot(n: int = CHAIN_JOINTS) -> jk.Robot:
+    """A float64 serial chain of ``n`` revolute joints ``joint1 ... joint<n>`` (frames ``base``,
+    ``link1 ... link<n>``): axes cycling z, y, x (exactly axis-aligned, so every peer can load
+    it), link offsets of 6 - 9 cm with small lateral parts, a twist (``rpy``) on every other
+    joint, limits +-pi, and a fixed tool frame ``tip`` 5 cm past the last joint."""
+    axes = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))
+    joints: list[dict[str, Any]] = []
     for i in range(n):
-        child = f"link{i + 1}"
-        link(child)
-        xyz = (0.01 * ((i % 3) - 1), 0.005 * (1 if i % 2 else -1), 0.06 + 0.01 * (i % 4))
-        rpy = (0.1 * (i % 3), 0.0, 0.25) if i % 2 else (0.0, 0.0, 0.0)
-        out.append(
-            f'  <joint name="joint{i + 1}" type="revolute">'
-            f'<parent link="{parent}"/><child link="{child}"/>'
-            f'<origin xyz="{xyz[0]:g} {xyz[1]:g} {xyz[2]:g}" '
-            f'rpy="{rpy[0]:g} {rpy[1]:g} {rpy[2]:g}"/>'
-            f'<axis xyz="{axes[i % 3]}"/>'
-            f'<limit lower="{-math.pi!r}" upper="{math.pi!r}" effort="1" velocity="1"/></joint>'
+        joints.append(
+            dict(
+                name=f"joint{i + 1}",
+                type="revolute",
+                parent=f"link{i}" if i else "base",
+                child=f"link{i + 1}",
+                xyz=(0.01 * ((i % 3) - 1), 0.005 * (1 if i % 2 else -1), 0.06 + 0.01 * (i % 4)),
+                rpy=(0.1 * (i % 3), 0.0, 0.25) if i % 2 else (0.0, 0.0, 0.0),
+                axis=axes[i % 3],
+                lower=-math.pi,
+                upper=math.pi,
+            )
         )
-        parent = child
-    link("tip")
-    out.append(
-        f'  <joint name="tip_joint" type="fixed"><parent link="{parent}"/><child link="tip"/>'
-        '<origin xyz="0 0 0.05" rpy="0 0 0"/></joint>'
-    )
-    out.append("</robot>")
-    return "\n".join(out)
+    joints.append(dict(name="tip_joint", type="fixed", child="tip", xyz=(0.0, 0.0, 0.05)))
+    return jk.Robot.from_joints(joints, root="base", name=f"chain{n}", dtype=np.float64)
 
 
 @dataclass
@@ -140,19 +113,19 @@ def robot_sources(names: list[str] | None = None) -> list[RobotSource]:
     makers = {
         "panda": lambda: RobotSource(
             "panda",
-            strip_urdf(find_example_robot_data("panda_description/urdf/panda.urdf").read_text()),
+            erd_urdf("erd/panda"),
             "panda_hand_tcp",
             "example-robot-data panda.urdf (fingers removed: chain to panda_hand_tcp)",
         ),
         "ur5": lambda: RobotSource(
             "ur5",
-            strip_urdf(find_example_robot_data("ur_description/urdf/ur5_robot.urdf").read_text()),
+            erd_urdf("erd/ur5_robot"),
             "tool0",
             "example-robot-data ur5_robot.urdf (chain world -> tool0)",
         ),
         f"chain{CHAIN_JOINTS}": lambda: RobotSource(
             f"chain{CHAIN_JOINTS}",
-            chain_urdf(CHAIN_JOINTS),
+            jk.to_urdf(chain_robot(CHAIN_JOINTS)),
             "tip",
             f"generated URDF string: {CHAIN_JOINTS} revolute joints, axes z/y/x, tool 'tip'",
         ),
@@ -164,73 +137,17 @@ def robot_sources(names: list[str] | None = None) -> list[RobotSource]:
     return [makers[n]() for n in chosen]
 
 
-def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
-    return default if text is None else tuple(float(x) for x in text.split())
-
-
-def chain_joints(urdf: str, tip: str) -> tuple[str, list[dict[str, Any]]]:
-    """(root link, joints from the root to ``tip`` as dicts of the URDF's own numbers)."""
-    root = ET.fromstring(urdf)
-    by_child = {j.find("child").get("link"): j for j in root.findall("joint")}
-    path, link = [], tip
-    while link in by_child:
-        j = by_child[link]
-        path.append(j)
-        link = j.find("parent").get("link")
-    joints = []
-    for j in reversed(path):
-        origin, axis, limit = j.find("origin"), j.find("axis"), j.find("limit")
-        get = lambda e, k: None if e is None else e.get(k)  # noqa: E731
-        joints.append(
-            dict(
-                name=j.get("name"),
-                type=j.get("type"),
-                parent=j.find("parent").get("link"),
-                child=j.find("child").get("link"),
-                xyz=_floats(get(origin, "xyz"), (0.0, 0.0, 0.0)),
-                rpy=_floats(get(origin, "rpy"), (0.0, 0.0, 0.0)),
-                axis=_floats(get(axis, "xyz"), (1.0, 0.0, 0.0)),
-                lower=float(get(limit, "lower") or 0.0),
-                upper=float(get(limit, "upper") or 0.0),
-            )
-        )
-    return link, joints
-
-
-def joint_specs(urdf: str, tip: str) -> tuple[str, list[dict[str, Any]]]:
-    """``Robot.from_joints`` specs for the chain root -> tip (fallback without ``load_urdf``)."""
-    root, joints = chain_joints(urdf, tip)
-    specs = []
-    for j in joints:
-        kind = {"continuous": "revolute"}.get(j["type"], j["type"])
-        spec = {k: j[k] for k in ("name", "parent", "child", "xyz", "rpy", "axis")}
-        spec["type"] = kind
-        if j["type"] in ("revolute", "prismatic"):
-            spec["lower"], spec["upper"] = j["lower"], j["upper"]
-        specs.append(spec)
-    return root, specs
-
-
-def axis_aligned(urdf: str, tip: str) -> bool:
-    """True when every moving joint on the chain to ``tip`` has an exactly axis-aligned axis."""
-    _, joints = chain_joints(urdf, tip)
-    for j in joints:
-        if j["type"] == "fixed":
-            continue
-        a = np.abs(np.asarray(j["axis"]))
-        if sorted(a.tolist()) != [0.0, 0.0, 1.0]:
-            return False
-    return True
+def axis_aligned(robot: jk.Robot) -> bool:
+    """True when every moving joint of ``robot`` has an exactly axis-aligned axis."""
+    axes = np.abs(np.asarray(robot.axis, dtype=np.float64))
+    moving = [a for a, kind in zip(axes, robot.kinds, strict=True) if kind != "fixed"]
+    return all(sorted(a.tolist()) == [0.0, 0.0, 1.0] for a in moving)
 
 
 def jaxkin_robot(src: RobotSource, dtype) -> tuple[jk.Robot, str]:
     """The jaxkin robot for ``src`` and how it was built."""
-    if hasattr(jk, "load_urdf"):
-        robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=dtype, name=src.name)
-        return robot, f"jk.load_urdf(<{src.name} URDF>, tip={src.tip!r})"
-    root, specs = joint_specs(src.urdf, src.tip)
-    robot = jk.Robot.from_joints(specs, root=root, name=src.name, dtype=dtype)
-    return robot, "jk.Robot.from_joints(the URDF's numbers) [jk.load_urdf not available]"
+    robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=dtype, name=src.name)
+    return robot, f"jk.load_urdf(<{src.name} URDF>, tip={src.tip!r})"
 
 
 # ---------------------------------------------------------------------------- peers
@@ -438,8 +355,12 @@ class TorchKinematics(Peer):
 
 
 MUJOCO_COMPILER = (
-    '<mujoco><compiler fusestatic="false" discardvisual="true" balanceinertia="true"/></mujoco>'
+    '<mujoco><compiler fusestatic="false" discardvisual="true" balanceinertia="true" '
+    'boundmass="1e-6" boundinertia="1e-9"/></mujoco>'
 )
+"""Inserted under ``<robot>``: fixed-joint frames kept as bodies (``fusestatic``), and every
+moving body given a mass and inertia (MuJoCo rejects massless moving bodies; the Jacobian of a
+point does not depend on them)."""
 
 
 def mujoco_model(src: RobotSource):
@@ -575,10 +496,10 @@ class RoboticsToolbox(Peer):
     def __init__(self, src: RobotSource, robot64: jk.Robot):
         import roboticstoolbox as rtb
 
-        if not axis_aligned(src.urdf, src.tip):
+        if not axis_aligned(robot64):
             raise RuntimeError(
-                "not every moving axis is exactly axis-aligned: RTB's URDF import is wrong then "
-                "(ORACLES.md), so it is not run"
+                "not every moving axis is exactly axis-aligned: RTB's URDF import is wrong then, "
+                "so it is not run"
             )
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / f"{src.name}.urdf"

@@ -24,8 +24,6 @@ Jacobians) plus, in ``memmap`` mode, the same again while ``chunked_map`` packs 
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import os
 import resource
 import shutil
@@ -33,14 +31,22 @@ import sys
 import tempfile
 import time
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+import jaxkin as jk
+from jaxkin.batch import chunked_map, stream_map
+
+from .jacobian_report import scale_summary
+from .peers import jaxkin_robot, robot_sources
+from .report import RESULTS_DIR, joint_rates, utc_now, write_json
+
 TARGET_RSS_MB = 2048
+MEMBER = "out.npy"  # the array inside the output npz
 
 
 def peak_rss_mb() -> float:
@@ -62,17 +68,19 @@ def current_rss_mb() -> float:
 
 def _configs(robot, start: int, stop: int, seed: int, block: int, dtype, rates: bool) -> np.ndarray:
     """Rows ``start:stop`` of the reproducible stream of configurations (``q``, or ``[q, qd]``
-    with ``rates``): block ``b`` (rows ``b*block : (b+1)*block``) comes from
-    ``default_rng([seed, b])``, q uniform in the limits, qd uniform in [-1, 1]."""
-    lo = np.asarray(robot.lower, dtype=np.float64)
-    hi = np.asarray(robot.upper, dtype=np.float64)
+    with ``rates``): block ``b`` (rows ``b*block : (b+1)*block``) has ``q`` from
+    ``jk.sample_configurations`` with key ``fold_in(key(seed), b)`` and ``qd`` from
+    :func:`bench.report.joint_rates` with seed ``[seed, b]``."""
     out = []
     for b in range(start // block, (stop - 1) // block + 1):
-        rng = np.random.default_rng([seed, b])
-        q = rng.uniform(lo, hi, size=(block, robot.dof))
-        qd = rng.uniform(-1.0, 1.0, size=(block, robot.dof))
+        key = jax.random.fold_in(jax.random.key(seed), b)
+        q = np.asarray(jk.sample_configurations(robot, block, key))
         a, z = max(start, b * block) - b * block, min(stop, (b + 1) * block) - b * block
-        out.append(np.concatenate([q[a:z], qd[a:z]], axis=1) if rates else q[a:z])
+        if rates:
+            qd = joint_rates(block, robot.dof, [seed, b])
+            out.append(np.concatenate([q[a:z], qd[a:z]], axis=1))
+        else:
+            out.append(q[a:z])
     return np.concatenate(out).astype(dtype)
 
 
@@ -111,46 +119,97 @@ def _npz_rows(path: Path, member: str, rows: list[int]) -> tuple[tuple[int, ...]
     return tuple(shape), np.stack(out)
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
-    import jax
+def _kernel(robot, what: str) -> tuple[Callable, tuple[int, ...]]:
+    """The per-row function of ``x`` (``q``, or ``[q, qd]`` for twists) and its output shape."""
+    dof = robot.dof
+    if what == "jacobian":
+        return (lambda x: jk.geometric_jacobian(robot, x[:dof])), (6, dof)
+    return (lambda x: jk.twist(robot, x[:dof], x[dof:])), (6,)
 
+
+def _memmap_pipeline(fn, robot, args, work: Path, out_path: Path, rates: bool) -> dict[str, Any]:
+    """Inputs written to a ``.npy`` block by block, mapped, ``chunked_map`` to ``out_path``."""
+    dtype = np.dtype(args.dtype)
+    t = time.perf_counter()
+    in_path = work / "configs.npy"
+    _write_npy(in_path, robot, args.n, args.seed, args.chunk, dtype, rates)
+    info = dict(input_write_s=time.perf_counter() - t, input_bytes=in_path.stat().st_size)
+    xs = np.load(in_path, mmap_mode="r")
+    _, stats = chunked_map(
+        fn, xs, chunk_size=args.chunk, out=str(out_path), progress=True, return_stats=True
+    )
+    del xs
+    return dict(
+        info,
+        compile_s=stats.compile_seconds,
+        map_s=stats.run_seconds,
+        n_chunks=stats.n_chunks,
+        padding=stats.padding,
+    )
+
+
+def _stream_pipeline(fn, robot, args, out_path: Path, row_shape, rates: bool) -> dict[str, Any]:
+    """Inputs from a generator, ``stream_map``, each result chunk written into the npz."""
+    n, block, dtype = args.n, args.chunk, np.dtype(args.dtype)
+
+    def batches() -> Iterator[np.ndarray]:
+        for start in range(0, n, block):
+            stop = min(start + block, n)
+            yield _configs(robot, start, stop, args.seed, block, dtype, rates)
+
+    t = time.perf_counter()
+    rows_done, first = 0, None
+    with zipfile.ZipFile(out_path, "w", zipfile.ZIP_STORED, allowZip64=True) as z:
+        with z.open(MEMBER, "w", force_zip64=True) as f:
+            header = {
+                "descr": np.lib.format.dtype_to_descr(dtype),
+                "fortran_order": False,
+                "shape": (n, *row_shape),
+            }
+            np.lib.format.write_array_header_1_0(f, header)
+            for res in stream_map(fn, batches(), chunk_size=block):
+                if first is None:  # the first chunk includes the compile
+                    first = time.perf_counter() - t
+                f.write(np.ascontiguousarray(res).tobytes())
+                rows_done += len(res)
+    assert rows_done == n, (rows_done, n)
+    return dict(map_s=time.perf_counter() - t, first_chunk_s=first)
+
+
+def _spot_check(fn, robot, args, out_path: Path, rates: bool) -> dict[str, Any]:
+    """Rows read back from the file against a direct evaluation."""
+    n = args.n
+    rows = sorted({0, 1, n // 2, n - 2, n - 1} & set(range(n)))
+    shape, got = _npz_rows(out_path, MEMBER, rows)
+    want = np.stack(
+        [
+            np.asarray(fn(_configs(robot, r, r + 1, args.seed, args.chunk, args.dtype, rates)[0]))
+            for r in rows
+        ]
+    )
+    return dict(
+        file_shape=list(shape),
+        spot_check_rows=rows,
+        spot_check_max_abs_diff=float(np.abs(got.astype(np.float64) - want).max()),
+    )
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.dtype == "float64":
         jax.config.update("jax_enable_x64", True)
-    import jaxkin as jk
-    from jaxkin.batch import chunked_map, stream_map
-
-    from .peers import jaxkin_robot, robot_sources
-
-    dtype = np.dtype(args.dtype)
     rates = args.what == "twist"
-    src = robot_sources(["panda"])[0]
-    robot, how = jaxkin_robot(src, dtype)
-    dof = robot.dof
-
-    if args.what == "jacobian":
-
-        def fn(x):
-            return jk.geometric_jacobian(robot, x[:dof])
-
-        member, row_shape = "out.npy", (6, dof)
-    else:
-
-        def fn(x):
-            return jk.twist(robot, x[:dof], x[dof:])
-
-        member, row_shape = "out.npy", (6,)
-
+    robot, how = jaxkin_robot(robot_sources(["panda"])[0], np.dtype(args.dtype))
+    fn, row_shape = _kernel(robot, args.what)
     work = Path(tempfile.mkdtemp(prefix="jaxkin-scale-", dir=args.dir))
     out_path = work / f"panda_{args.what}_{args.n}.npz"
-    n, block = args.n, args.chunk
     info: dict[str, Any] = dict(
-        date_utc=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        date_utc=utc_now(),
         load_average_1min=os.getloadavg()[0],
-        n=n,
+        n=args.n,
         what=args.what,
         dtype=args.dtype,
         inputs=args.inputs,
-        chunk_size=block,
+        chunk_size=args.chunk,
         robot=f"panda: {how}",
         out=str(out_path),
         rss_mb_after_imports=current_rss_mb(),
@@ -158,64 +217,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     t_all = time.perf_counter()
     try:
         if args.inputs == "memmap":
-            t = time.perf_counter()
-            in_path = work / "configs.npy"
-            _write_npy(in_path, robot, n, args.seed, block, dtype, rates)
-            info["input_write_s"] = time.perf_counter() - t
-            info["input_bytes"] = in_path.stat().st_size
-            xs = np.load(in_path, mmap_mode="r")
-            _, stats = chunked_map(
-                fn, xs, chunk_size=block, out=str(out_path), progress=True, return_stats=True
-            )
-            info.update(
-                compile_s=stats.compile_seconds,
-                map_s=stats.run_seconds,
-                n_chunks=stats.n_chunks,
-                padding=stats.padding,
-            )
-            del xs
+            info.update(_memmap_pipeline(fn, robot, args, work, out_path, rates))
         else:
-
-            def batches() -> Iterator[np.ndarray]:
-                for start in range(0, n, block):
-                    stop = min(start + block, n)
-                    yield _configs(robot, start, stop, args.seed, block, dtype, rates)
-
-            t = time.perf_counter()
-            rows_done, first = 0, None
-            with zipfile.ZipFile(out_path, "w", zipfile.ZIP_STORED, allowZip64=True) as z:
-                with z.open(member, "w", force_zip64=True) as f:
-                    header = {
-                        "descr": np.lib.format.dtype_to_descr(dtype),
-                        "fortran_order": False,
-                        "shape": (n, *row_shape),
-                    }
-                    np.lib.format.write_array_header_1_0(f, header)
-                    for res in stream_map(fn, batches(), chunk_size=block):
-                        if first is None:  # the first chunk includes the compile
-                            first = time.perf_counter() - t
-                        f.write(np.ascontiguousarray(res).tobytes())
-                        rows_done += len(res)
-            assert rows_done == n, (rows_done, n)
-            info.update(map_s=time.perf_counter() - t, first_chunk_s=first)
+            info.update(_stream_pipeline(fn, robot, args, out_path, row_shape, rates))
         info["wall_s"] = time.perf_counter() - t_all
         info["peak_rss_mb"] = peak_rss_mb()
         info["out_bytes"] = out_path.stat().st_size
-        info["throughput_per_s"] = n / info["map_s"]
-        info["throughput_wall_per_s"] = n / info["wall_s"]
-
-        # spot checks: rows read back from the file against a direct evaluation
-        rows = sorted({0, 1, n // 2, n - 2, n - 1} & set(range(n)))
-        shape, got = _npz_rows(out_path, member, rows)
-        want = np.stack(
-            [
-                np.asarray(fn(_configs(robot, r, r + 1, args.seed, block, dtype, rates)[0]))
-                for r in rows
-            ]
-        )
-        info["file_shape"] = list(shape)
-        info["spot_check_rows"] = rows
-        info["spot_check_max_abs_diff"] = float(np.abs(got.astype(np.float64) - want).max())
+        info["throughput_per_s"] = args.n / info["map_s"]
+        info["throughput_wall_per_s"] = args.n / info["wall_s"]
+        info.update(_spot_check(fn, robot, args, out_path, rates))
         info["peak_rss_mb_end"] = peak_rss_mb()
     finally:
         if args.keep:
@@ -236,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--dir", default=None, help="where to write (default: the temp directory)")
     p.add_argument("--keep", action="store_true", help="keep the files (default: delete)")
-    p.add_argument("--json", type=Path, default=HERE / "results" / "scale.json")
+    p.add_argument("--json", type=Path, default=RESULTS_DIR / "scale.json")
     args = p.parse_args(argv)
 
     free = shutil.disk_usage(args.dir or tempfile.gettempdir()).free
@@ -248,22 +258,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     info = run(args)
     info["target_peak_rss_mb"] = TARGET_RSS_MB
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(info, indent=1) + "\n")
-    print(
-        f"{info['n']:,} Panda configurations -> {info['what']} ({info['dtype']}), inputs "
-        f"{info['inputs']}, chunks of {info['chunk_size']:,}\n"
-        f"  map: {info['map_s']:.1f} s = {info['throughput_per_s'] / 1e6:.2f} M/s "
-        f"(compile {info.get('compile_s', info.get('first_chunk_s', 0)):.2f} s included "
-        f"{'in the first chunk' if args.inputs == 'stream' else 'apart'}); wall "
-        f"{info['wall_s']:.1f} s = {info['throughput_wall_per_s'] / 1e6:.2f} M/s\n"
-        f"  output {info['out_bytes'] / 1e9:.2f} GB, shape {tuple(info['file_shape'])}; spot "
-        f"check of rows {info['spot_check_rows']}: max abs diff "
-        f"{info['spot_check_max_abs_diff']:.1e}\n"
-        f"  peak RSS {info['peak_rss_mb']:.0f} MiB (target <= {TARGET_RSS_MB} MiB; "
-        f"{info['rss_mb_after_imports']:.0f} MiB after imports); files "
-        f"{'kept in ' + info['kept'] if 'kept' in info else 'deleted'} -> {args.json}"
-    )
+    write_json(args.json, info)
+    print(scale_summary(info, args.json))
     return 0
 
 

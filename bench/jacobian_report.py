@@ -1,0 +1,541 @@
+"""What the Jacobian benchmark reports: the tables it prints, the generated results section of
+bench/README.md (between :data:`MARK_START` and :data:`MARK_END`), and the plot.
+
+Everything here reads a result (the dictionary :mod:`bench.jacobians` measures and writes as JSON,
+or an earlier run's JSON: ``python3 -m bench --from-json PATH``) and measures nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .report import (
+    HERE,
+    RESULTS_DIR,
+    fmt_diff,
+    fmt_n,
+    fmt_rate,
+    fmt_us,
+    markdown_table,
+    median,
+    replace_section,
+)
+
+README = HERE / "README.md"
+MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
+
+QUANTITIES = ("geometric", "analytical", "twist")
+DTYPES = ("float64", "float32")
+HEADLINE = dict(robot="panda", quantity="geometric", n=100_000)
+# Bounds of this machine for a constant-folded 7-DOF Panda Jacobian (jacobians per second):
+# XLA's CPU sin/cos throughput for the 7 sin/cos pairs, and memory bandwidth (about 25 GB/s)
+# for its 392 bytes of input and output in float64 (196 in float32). See bench/README.md.
+BOUNDS = dict(
+    sincos_float64=10e6,
+    sincos_float32=(15e6, 23e6),
+    memory_float64=35e6,
+    memory_float32=65e6,
+)
+Rows = list[dict[str, Any]]
+
+# ---------------------------------------------------------------------------- tables
+
+
+def _cell(row: dict[str, Any] | None) -> str:
+    if row is None:
+        return ""
+    if row["status"] != "ok":
+        return "skipped" if row["status"].startswith("skipped") else "failed"
+    cell = fmt_rate(row["per_s"])
+    if "ratio_vs_pin" in row:
+        cell += f" ({row['ratio_vs_pin']:.2f}x)"
+    if row.get("n_timed", row["n"]) != row["n"]:
+        cell += "*"
+    return cell
+
+
+IMPL_ORDER = ("jaxkin", "pytorch_kinematics", "MuJoCo Batch", "MuJoCo (Python", "Robotics")
+
+
+def _impl_key(impl: str) -> int:
+    for i, prefix in enumerate(IMPL_ORDER):
+        if impl.startswith(prefix):
+            return i
+    return len(IMPL_ORDER)
+
+
+def _pivot_line(key: tuple[str, str, str], ns: list[int], by_key: dict) -> list[str]:
+    """One implementation's cells (a rate per N) and its check against the reference."""
+    impl, quantity, dtype = key
+    cells, diff, against = [], math.nan, ""
+    for n in ns:
+        row = by_key.get((*key, n))
+        cells.append(_cell(row))
+        if row is not None and math.isnan(diff) and "max_abs_diff" in row:
+            diff, against = row["max_abs_diff"], row.get("diff_against", "")
+    d = fmt_diff(diff)
+    if against and not against.startswith("Pinocchio"):
+        d += " (vs jaxkin)" if "world_aligned" in against else " (vs jaxkin WORLD)"
+    label = impl if impl != "jaxkin" else "jaxkin jit(vmap)"
+    return [label, quantity, dtype, *cells, d]
+
+
+def pivot(rows: Rows, robot: str, quantities: tuple[str, ...]) -> str:
+    """Rates per N for one robot: one line per (implementation, quantity, dtype), then the
+    Pinocchio reference of each quantity (its interleaved samples pooled)."""
+    sel = [
+        r
+        for r in rows
+        if r["robot"] == robot and r["quantity"] in quantities and not r["impl"].endswith("single")
+    ]
+    ns = sorted({r["n"] for r in sel})
+    keys = list(dict.fromkeys((r["impl"], r["quantity"], r["dtype"]) for r in sel))
+    keys.sort(key=lambda k: (QUANTITIES.index(k[1]), _impl_key(k[0]), k[0], DTYPES.index(k[2])))
+    # the first row of each (impl, quantity, dtype, n) counts
+    by_key = {(r["impl"], r["quantity"], r["dtype"], r["n"]): r for r in reversed(sel)}
+    lines = [_pivot_line(key, ns, by_key) for key in keys]
+    for quantity in quantities:
+        pins = [
+            s
+            for r in sel
+            if r["quantity"] == quantity and r["status"] == "ok"
+            for s in r["pin_samples_s"]
+        ]
+        if pins:
+            rate = fmt_rate(1.0 / median(pins))
+            ref = "Pinocchio (Python loop, reference)"
+            lines.append([ref, quantity, "float64", *(rate for _ in ns), "reference"])
+    header = ["implementation", "quantity", "dtype", *(f"N = {fmt_n(n)}" for n in ns)]
+    return markdown_table([*header, "max abs diff"], lines, "lll" + "r" * (len(ns) + 1))
+
+
+def single_table(rows: Rows, floor_us: float) -> str:
+    lines = []
+    for r in rows:
+        if r["impl"] != "jaxkin single" or r["status"] != "ok":
+            continue
+        vm = _find(
+            rows, robot=r["robot"], impl="jaxkin", quantity="geometric", n=1, dtype=r["dtype"]
+        )
+        pin = [x for x in rows if (x["robot"], x["impl"]) == (r["robot"], "pinocchio single")]
+        lo, hi = min(r["samples_s"]) * 1e6, max(r["samples_s"]) * 1e6
+        lines.append(
+            [
+                r["robot"],
+                r["dtype"],
+                f"{fmt_us(r['us_each'])} ({fmt_us(lo)} - {fmt_us(hi)})",
+                fmt_us(vm["us_each"]) + " us" if vm else "",
+                fmt_us(pin[0]["us_each"]) + " us" if pin else "",
+                "<= 15 us",
+            ]
+        )
+    header = [
+        "robot",
+        "dtype",
+        "jaxkin `jit(f)(q)` us/call (min - max)",
+        "jaxkin `jit(vmap(f))` N = 1",
+        "Pinocchio one call",
+        "target",
+    ]
+    floor = f"Dispatch floor (a trivial jitted call on a (6,) array): {floor_us:.1f} us."
+    return markdown_table(header, lines, "llrrrr") + "\n\n" + floor
+
+
+def compile_table(rows: Rows) -> str:
+    groups: dict[tuple[str, str, str], Rows] = {}
+    for r in rows:
+        if r["impl"] == "jaxkin" and "compile_s" in r:
+            groups.setdefault((r["robot"], r["quantity"], r["dtype"]), []).append(r)
+    lines = []
+    for (robot, quantity, dtype), rs in groups.items():
+        low = [r["lower_s"] for r in rs]
+        comp = [r["compile_s"] for r in rs]
+        ok = [r for r in rs if "first_call_s" in r]
+        first = f"{ok[-1]['first_call_s']:.3f} (N = {fmt_n(ok[-1]['n'])})" if ok else ""
+        lines.append(
+            [
+                robot,
+                quantity,
+                dtype,
+                f"{np.median(low):.2f}; {max(low):.2f}",
+                f"{np.median(comp):.2f}; {max(comp):.2f}",
+                first,
+            ]
+        )
+    header = [
+        "robot",
+        "quantity",
+        "dtype",
+        "trace + lower s (median; max)",
+        "XLA compile s (median; max)",
+        "first call after compile s (largest N)",
+    ]
+    out = markdown_table(header, lines, "lllrrr")
+    singles = [r for r in rows if r["impl"] == "jaxkin single" and "first_call_s" in r]
+    if singles:
+        out += (
+            "\n\nSingle-configuration `jax.jit(lambda q: jk.geometric_jacobian(robot, q))`, first "
+            "call (trace + compile + run): "
+            + ", ".join(f"{r['robot']} {r['dtype']} {r['first_call_s']:.2f} s" for r in singles)
+            + "."
+        )
+    return out
+
+
+def _profile_n(rows: Rows) -> int:
+    ns = sorted({r["n"] for r in rows if r["impl"] == "jaxkin" and r.get("hlo")})
+    return 100_000 if 100_000 in ns else (ns[-1] if ns else 0)
+
+
+def profile_table(rows: Rows) -> str:
+    n = _profile_n(rows)
+    intro = (
+        f"Optimised HLO of each batched kernel at N = {fmt_n(n)}: loop fusions (each one pass "
+        "over the batch; `while` loops for the scan path), sin + cos ops compiled vs emitted by "
+        "jaxkin (for the scan path: in the loop body, i.e. per joint step), and the compiled "
+        "kernel's temporaries against its input + output per configuration (XLA's memory "
+        "analysis)."
+    )
+    lines = []
+    for r in rows:
+        if r["impl"] != "jaxkin" or r["n"] != n or not r.get("hlo"):
+            continue
+        h = r["hlo"]
+        rate = fmt_rate(r["per_s"]) + "/s" if r["status"] == "ok" else r["status"].split(":")[0]
+        lines.append(
+            [
+                r["robot"],
+                r["quantity"],
+                r["dtype"],
+                f"{h.get('fusions', '')}",
+                f"{h.get('whiles', '')}",
+                f"{h.get('sincos_compiled', '')} / {h.get('sincos_emitted', '')}",
+                f"{h.get('temp_bytes_per_config', math.nan):.0f}",
+                f"{h.get('io_bytes_per_config', math.nan):.0f}",
+                rate,
+            ]
+        )
+    header = [
+        "robot",
+        "quantity",
+        "dtype",
+        "fusions",
+        "while loops",
+        "sin+cos compiled / emitted",
+        "temp bytes / config",
+        "in + out bytes / config",
+        "rate",
+    ]
+    return intro + "\n\n" + markdown_table(header, lines, "lll" + "r" * 6)
+
+
+# ---------------------------------------------------------------------------- prose
+
+
+def _find(rows: Rows, **kw) -> dict[str, Any] | None:
+    """The first measured (status ok) row whose fields equal ``kw``."""
+    for r in rows:
+        if all(r.get(k) == v for k, v in kw.items()) and r["status"] == "ok":
+            return r
+    return None
+
+
+def headline(result: dict[str, Any]) -> str:
+    rows = result["rows"]
+    h = HEADLINE
+    parts = []
+    where = dict(robot=h["robot"], impl="jaxkin", quantity=h["quantity"], n=h["n"])
+    r64 = _find(rows, dtype="float64", **where)
+    r32 = _find(rows, dtype="float32", **where)
+    if r64 is None:
+        return (
+            f"**Headline**: not available from this run (no Panda geometric row at N = "
+            f"{fmt_n(h['n'])}; this run stopped at N = {fmt_n(max(result['config']['ns']))})."
+        )
+    parts.append(
+        f"**Headline** (Panda from example-robot-data's URDF, 6x7 geometric Jacobian, N = "
+        f"{fmt_n(h['n'])}): jaxkin computes **{fmt_rate(r64['per_s'])} Jacobians/s in float64, "
+        f"{r64['ratio_vs_pin']:.2f}x Pinocchio called from Python** "
+        f"({fmt_rate(r64['pin_per_s'])}/s, measured interleaved in the same process)"
+    )
+    if r32 is not None:
+        parts.append(
+            f", and **{fmt_rate(r32['per_s'])}/s in float32** ({r32['ratio_vs_pin']:.2f}x)"
+        )
+    s = _find(rows, robot=h["robot"], impl="jaxkin single", dtype="float64")
+    if s is not None:
+        parts.append(
+            f". One configuration from Python (`jax.jit(lambda q: jk.geometric_jacobian(robot, "
+            f"q))(q)`): {fmt_us(s['us_each'])} us per call (target <= 15 us; dispatch floor "
+            f"{result['dispatch_floor_us']:.1f} us)"
+        )
+    return "".join(parts) + "."
+
+
+def limits(result: dict[str, Any]) -> str:
+    """Where the headline rows stand against :data:`BOUNDS`, and their compiled profile."""
+    rows = result["rows"]
+    h = HEADLINE
+    out = []
+    for dtype in DTYPES:
+        where = dict(robot=h["robot"], impl="jaxkin", quantity=h["quantity"], n=h["n"])
+        r = _find(rows, dtype=dtype, **where)
+        if r is None:
+            continue
+        rate = r["per_s"]
+        sc = BOUNDS[f"sincos_{dtype}"]
+        sc_txt = (
+            f"{rate / sc:.0%} of the ~{sc / 1e6:.0f} M/s sin/cos bound"
+            if not isinstance(sc, tuple)
+            else f"{rate / sc[1]:.0%} - {rate / sc[0]:.0%} of the {sc[0] / 1e6:.0f} - "
+            f"{sc[1] / 1e6:.0f} M/s sin/cos bound"
+        )
+        mem = BOUNDS[f"memory_{dtype}"]
+        hlo = r.get("hlo", {})
+        out.append(
+            f"- Panda geometric, {dtype}, N = {fmt_n(h['n'])}: {fmt_rate(rate)}/s = {sc_txt}, "
+            f"{rate / mem:.0%} of the ~{mem / 1e6:.0f} M/s memory-bandwidth bound. Compiled: "
+            f"{hlo.get('fusions', '?')} loop fusions, {hlo.get('sincos_compiled', '?')} sin/cos "
+            f"ops for the {hlo.get('sincos_emitted', '?')} jaxkin emits, "
+            f"{hlo.get('temp_bytes_per_config', math.nan):.0f} bytes of temporaries per "
+            f"Jacobian besides {hlo.get('io_bytes_per_config', math.nan):.0f} bytes of input "
+            "and output."
+        )
+    return "\n".join(out)
+
+
+def machine_line(result: dict[str, Any]) -> str:
+    m = result["machine"]
+    la = result["load_average_1_5_15min"]
+    return (
+        f"Run: {result['mode']}, {m['date_utc']}, {result['elapsed_s']:.0f} s. Machine: "
+        f"{', '.join(m['cpu_model'])} ({m['cpu_mhz']} MHz; {', '.join(m['simd'])}), "
+        f"{m['cpus_usable']} usable CPUs, {m['mem_total']} RAM, {', '.join(m['jax_devices'])}; "
+        f"{m['platform']}. Load average (1 min) {la['before'][0]:.2f} before, "
+        f"{la['after'][0]:.2f} after. Versions: Python {m['python']}, jax {m['jax']}, jaxlib "
+        f"{m['jaxlib']}, NumPy {m['numpy']}, jaxkin {m['jaxkin']}, pin {m['pinocchio']}, "
+        f"example-robot-data {m['example_robot_data']}, pytorch-kinematics "
+        f"{m['pytorch_kinematics']} (torch {m['torch']}, default {m['torch_threads']} "
+        f"threads), mujoco {m['mujoco']}, roboticstoolbox-python {m['roboticstoolbox']}."
+    )
+
+
+def scale_markdown(path: Path = RESULTS_DIR / "scale.json") -> str:
+    """The last ``python3 -m bench.scale`` run (results/scale.json), if there is one."""
+    if not path.is_file():
+        return "No `python3 -m bench.scale` result yet (results/scale.json)."
+    s = json.loads(path.read_text())
+    compile_s = s.get("compile_s", s.get("first_chunk_s", math.nan))
+    return (
+        f"`python3 -m bench.scale` (results/scale.json, {s.get('date_utc', 'date not recorded')}, "
+        f"load average {s.get('load_average_1min', math.nan):.2f}): {s['n']:,} Panda "
+        f"configurations -> {s['what']} ({s['dtype']}), inputs {s['inputs']}, chunks of "
+        f"{s['chunk_size']:,}: map {s['map_s']:.1f} s = "
+        f"**{s['throughput_per_s'] / 1e6:.2f} M/s** (compile {compile_s:.2f} s), wall "
+        f"{s['wall_s']:.1f} s ({s['throughput_wall_per_s'] / 1e6:.2f} M/s, input generation and "
+        f"packing included); output {s['out_bytes'] / 1e9:.2f} GB on disk, spot check max abs "
+        f"diff {s['spot_check_max_abs_diff']:.1e}; **peak RSS {s['peak_rss_mb']:.0f} MiB** "
+        f"(target <= {s.get('target_peak_rss_mb', 2048)} MiB; {s['rss_mb_after_imports']:.0f} "
+        "MiB after imports); files deleted afterwards."
+    )
+
+
+def scale_summary(info: dict[str, Any], json_path: Path) -> str:
+    """What ``python3 -m bench.scale`` prints at the end of a run."""
+    compile_where = "in the first chunk" if info["inputs"] == "stream" else "apart"
+    return (
+        f"{info['n']:,} Panda configurations -> {info['what']} ({info['dtype']}), inputs "
+        f"{info['inputs']}, chunks of {info['chunk_size']:,}\n"
+        f"  map: {info['map_s']:.1f} s = {info['throughput_per_s'] / 1e6:.2f} M/s "
+        f"(compile {info.get('compile_s', info.get('first_chunk_s', 0)):.2f} s included "
+        f"{compile_where}); wall "
+        f"{info['wall_s']:.1f} s = {info['throughput_wall_per_s'] / 1e6:.2f} M/s\n"
+        f"  output {info['out_bytes'] / 1e9:.2f} GB, shape {tuple(info['file_shape'])}; spot "
+        f"check of rows {info['spot_check_rows']}: max abs diff "
+        f"{info['spot_check_max_abs_diff']:.1e}\n"
+        f"  peak RSS {info['peak_rss_mb']:.0f} MiB (target <= {info['target_peak_rss_mb']} MiB; "
+        f"{info['rss_mb_after_imports']:.0f} MiB after imports); files "
+        f"{'kept in ' + info['kept'] if 'kept' in info else 'deleted'} -> {json_path}"
+    )
+
+
+# ---------------------------------------------------------------------------- README section
+
+CELLS_NOTE = (
+    "Cells: Jacobians (or twists) per second, median of the samples, and in brackets the "
+    "ratio to Pinocchio from Python measured interleaved with that row (above 1: faster). "
+    "`*`: a Python-loop peer timed over fewer configurations than N (its rate does not "
+    "depend on N). `skipped`: predicted call time or memory over the limits (JSON: "
+    "`status`). max abs diff: jaxkin rows against Pinocchio (same frame, float64 "
+    "reference); peer rows against jaxkin float64."
+)
+QUICK_NOTE = (
+    "**This is a `--quick` smoke run (small N, 2 repeats, possibly a loaded machine): "
+    "its numbers only show that everything runs. Run `python3 -m bench --write-readme` "
+    "on a quiet machine for the real tables.**"
+)
+
+
+def _robot_section(name: str, info: dict[str, Any], rows: Rows) -> list[str]:
+    parts = [
+        f"### {name} ({info['dof']} DOF)",
+        "",
+        f"URDF: {info['urdf']}. jaxkin: `{info['jaxkin']}`"
+        + (" (lax.scan path)" if info.get("scan_path") else "")
+        + f"; tip pose vs Pinocchio {info['tip_pose_diff_vs_pinocchio']:.1e}.",
+    ]
+    if info.get("peers_failed"):
+        parts.append(
+            "Unavailable peers: "
+            + "; ".join(f"{k}: {v}" for k, v in info["peers_failed"].items())
+            + "."
+        )
+    return [*parts, "", pivot(rows, name, QUANTITIES), ""]
+
+
+def results_markdown(result: dict[str, Any]) -> str:
+    """The generated results section of bench/README.md."""
+    rows = result["rows"]
+    parts = [
+        "_Generated by `python3 -m bench --write-readme` from "
+        f"`results/{result.get('json_name', 'latest.json')}`; do not edit by hand._",
+        "",
+        headline(result),
+        "",
+        machine_line(result),
+        "",
+    ]
+    if result["mode"] != "full":
+        parts += [QUICK_NOTE, ""]
+    parts += [CELLS_NOTE, ""]
+    for name, info in result["robots"].items():
+        parts += _robot_section(name, info, rows)
+    parts += [
+        "### One configuration from Python (N = 1)",
+        "",
+        single_table(rows, result["dispatch_floor_us"]),
+        "",
+        "### Compile times (jaxkin, per batch shape)",
+        "",
+        compile_table(rows),
+        "",
+        "### Profile of the compiled kernels",
+        "",
+        profile_table(rows),
+        "",
+        "### Distance from the machine limits",
+        "",
+        limits(result) or "Not available from this run (no Panda row at N = 100k).",
+        "",
+        "### Scale: 10 million configurations",
+        "",
+        scale_markdown(),
+    ]
+    return "\n".join(parts)
+
+
+def write_readme(result: dict[str, Any], path: Path = README) -> None:
+    """Replace the generated results section of bench/README.md (``path``)."""
+    replace_section(path, results_markdown(result), MARK_START, MARK_END)
+
+
+def print_tables(result: dict[str, Any], out_path: Path) -> None:
+    """The tables on stdout, at the end of a run."""
+    print()
+    print(headline(result))
+    print()
+    print(machine_line(result))
+    for name in result["robots"]:
+        print(f"\n### {name}\n")
+        print(pivot(result["rows"], name, QUANTITIES))
+    print("\n### One configuration from Python\n")
+    print(single_table(result["rows"], result["dispatch_floor_us"]))
+    print("\n### Compile times\n")
+    print(compile_table(result["rows"]))
+    print("\n### Profile\n")
+    print(profile_table(result["rows"]))
+    lim = limits(result)
+    if lim:
+        print("\n### Machine limits\n")
+        print(lim)
+    print(f"\n-> {out_path}")
+
+
+# ---------------------------------------------------------------------------- plot
+
+STYLES = {
+    "float64": "-",
+    "float32": "--",
+}
+
+
+def _plot_panel(ax, sel: Rows, quantities: tuple[str, ...], colors: dict[str, str]) -> None:
+    """One panel: a rate-against-N line per (implementation, quantity, dtype), and the Pinocchio
+    reference of each quantity as a horizontal line."""
+    per_quantity = len(quantities) > 1
+    keys = list(dict.fromkeys((r["impl"], r["quantity"], r["dtype"]) for r in sel))
+    for impl, quantity, dtype in keys:
+        pts = sorted(
+            (r["n"], r["per_s"])
+            for r in sel
+            if (r["impl"], r["quantity"], r["dtype"]) == (impl, quantity, dtype)
+        )
+        ckey = f"{impl} {quantity}" if per_quantity else impl
+        if ckey not in colors:
+            colors[ckey] = f"C{len(colors) % 10}"
+        ax.loglog(
+            [p[0] for p in pts],
+            [p[1] for p in pts],
+            STYLES[dtype],
+            marker="o" if dtype == "float64" else "s",
+            color=colors[ckey],
+            label=f"{impl} {quantity} {dtype}" if per_quantity else f"{impl} {dtype}",
+            markersize=4,
+        )
+    for quantity, ls in zip(quantities, (":", "-."), strict=False):
+        pins = [
+            s
+            for r in sel
+            if r["quantity"] == quantity and r["impl"] == "jaxkin"
+            for s in r["pin_samples_s"]
+        ]
+        if pins:
+            label = f"Pinocchio {quantity} (Python loop)"
+            ax.axhline(1.0 / median(pins), color="k", linestyle=ls, label=label)
+
+
+def plot(rows: Rows, path: Path) -> None:
+    """Rates against N: a column per robot, geometric above, analytical and twist below."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    robots = list(dict.fromkeys(r["robot"] for r in rows))
+    fig, axes = plt.subplots(2, len(robots), figsize=(5.6 * len(robots), 8.5), squeeze=False)
+    colors: dict[str, str] = {}
+    for col, name in enumerate(robots):
+        for row_i, quantities in enumerate((("geometric",), ("analytical", "twist"))):
+            ax = axes[row_i][col]
+            sel = [
+                r
+                for r in rows
+                if r["robot"] == name
+                and r["quantity"] in quantities
+                and r["status"] == "ok"
+                and not r["impl"].endswith("single")
+            ]
+            _plot_panel(ax, sel, quantities, colors)
+            ax.set_title(f"{name}: {' and '.join(quantities)}")
+            ax.set_xlabel("batch size N")
+            ax.set_ylabel("per second (median)")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
