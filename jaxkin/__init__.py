@@ -14,6 +14,7 @@ from . import derivatives as derivatives
 from . import ik as ik
 from . import inverse_velocity as inverse_velocity
 from . import robots as robots
+from . import sampling as sampling
 from . import spatial as spatial
 from .analysis import condition_number as condition_number
 from .analysis import dependent_columns as dependent_columns
@@ -60,6 +61,8 @@ from .model import Robot as Robot
 from .representations import analytical_from_geometric as analytical_from_geometric
 from .representations import rate_matrix as rate_matrix
 from .representations import representation_margin as representation_margin
+from .sampling import sample_configurations as sample_configurations
+from .sampling import sampling_bounds as sampling_bounds
 from .urdf import load_urdf as load_urdf
 from .urdf_export import to_urdf as to_urdf
 from .velocity import classify_motion as classify_motion

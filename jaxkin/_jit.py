@@ -25,12 +25,9 @@ from typing import Any
 
 import jax
 
+from ._checks import inside_trace, is_traced
+
 _OPTIONS = {"xla_cpu_use_fusion_emitters": False}
-
-
-def is_concrete(tree: Any) -> bool:
-    """True when no leaf of ``tree`` is a JAX tracer."""
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 @functools.cache
@@ -41,17 +38,6 @@ def compiler_options() -> dict:
     except Exception:  # pragma: no cover - depends on the installed jaxlib
         return {}
     return dict(_OPTIONS)
-
-
-def _tracing() -> bool:
-    """True inside a ``jit``/``vmap``/``grad`` trace (where a nested ``jax.jit`` may not carry
-    compiler options)."""
-    try:
-        from jax._src import core
-
-        return not core.trace_state_clean()
-    except Exception:  # pragma: no cover - private API moved: assume nested, no options
-        return True
 
 
 def robot_jit(impl: Callable, static_argnames: tuple[str, ...] = ()) -> Callable:
@@ -74,8 +60,8 @@ def robot_jit(impl: Callable, static_argnames: tuple[str, ...] = ()) -> Callable
 
     @functools.wraps(impl)
     def call(robot, *args, **kwargs):
-        if is_concrete(robot):
-            return jitted_fn(nested=_tracing())(robot, *args, **kwargs)
+        if not is_traced(robot):
+            return jitted_fn(nested=inside_trace())(robot, *args, **kwargs)
         return impl(robot, *args, **kwargs)
 
     call.get_jitted = jitted_fn  # type: ignore[attr-defined]

@@ -33,9 +33,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_J, check_point, check_q, check_reference, is_traced, result_dtype
 from .errors import JaxkinError, ShapeError
-from .jacobians import check_reference, geometric_jacobian
-from .kinematics import check_q, forward_pass
+from .jacobians import jacobian_pass
+from .kinematics import forward_pass
 from .model import Robot
 
 __all__ = [
@@ -64,28 +65,6 @@ _NAMED_ROWS = {"translation": (0, 1, 2), "rotation": (3, 4, 5)}
 
 
 # ----------------------------------------------------------------------------- validation
-def _check_J(J: Any, fn: str) -> jax.Array:
-    shape = getattr(J, "shape", None)
-    if shape is None:
-        try:
-            J = np.asarray(J, dtype=float)
-        except (TypeError, ValueError):
-            raise ShapeError(f"{fn}: J must be an array of numbers, got {J!r:.80}.") from None
-        shape = J.shape
-    if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
-        hint = ""
-        if len(shape) == 3:
-            hint = f" For a batch of Jacobians use jax.vmap, e.g. jax.vmap({fn})(Js)."
-        raise ShapeError(
-            f"{fn}: J must have shape (m, dof) (e.g. (6, dof) from jk.geometric_jacobian), got "
-            f"shape {tuple(shape)}.{hint}"
-        )
-    J = jnp.asarray(J)
-    if not jnp.issubdtype(J.dtype, jnp.floating):
-        J = J.astype(jnp.result_type(float))
-    return J
-
-
 def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
     """Row indices selected by ``rows`` (None: all rows)."""
     if isinstance(rows, str):
@@ -119,7 +98,7 @@ def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
 
 
 def _select(J: Any, rows: Any, fn: str) -> jax.Array:
-    J = _check_J(J, fn)
+    J = check_J(J, fn)
     idx = _row_indices(rows, J.shape[0], fn)
     return J if idx is None else J[jnp.array(idx)]
 
@@ -302,13 +281,14 @@ def manipulability_gradient(
     check_reference(reference)
     _check_measure(measure, fn)
     q = check_q(robot, q, fn=fn)
-    q = q.astype(jnp.result_type(robot.base.dtype, q.dtype))
+    q = q.astype(result_dtype(robot, q))
     f = robot.frame_index(frame)
+    pt = check_point(point, q.dtype, fn)
     # Validate rows eagerly (shape 6).
     _row_indices(rows, 6, fn)
 
     def m(qq):
-        J = geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+        J = jacobian_pass(robot, qq, f, pt, reference).matrix()
         return manipulability(J, measure=measure, rows=rows)
 
     return jax.grad(m)(q)
@@ -371,7 +351,7 @@ def joint_torques(J: Any, wrench: Any) -> jax.Array:
     the environment (equivalently, what an external wrench ``-F`` loads them with); power:
     ``F . (J qd) == tau . qd``.
     """
-    J = _check_J(J, "jk.joint_torques")
+    J = check_J(J, "jk.joint_torques")
     F = jnp.asarray(wrench)
     if F.shape != (J.shape[0],):
         raise ShapeError(
@@ -517,7 +497,7 @@ def wrist_decoupling(
     fn = "jk.wrist_decoupling"
     arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
-    J = geometric_jacobian(robot, q, frame=frame)
+    J = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned").matrix()
     fp = forward_pass(robot, q)  # joint axes and origins, shared with the wrist centre
     p = fp.p[robot.frame_index(frame)]
     c, dist = _wrist_centre(fp, wrist_model)
@@ -540,10 +520,7 @@ def wrist_decoupling(
         coupling=jnp.max(jnp.abs(J12)),
         axis_distance=dist,
     )
-    concrete = not any(
-        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((robot, q))
-    )
-    if check and concrete:
+    if check and not is_traced(robot, q):
         d = float(out.axis_distance)
         scale = max(1.0, float(jnp.linalg.norm(c)))
         if not d <= 1e-9 * scale:

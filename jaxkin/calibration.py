@@ -33,11 +33,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._jit import is_concrete, robot_jit
+from ._checks import is_traced
+from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .ik import _default_optimizer, _pose_residual
 from .kinematics import forward_pass
 from .model import Robot
+from .optimizers import default_optimizer
+from .pose_errors import pose_residual
 
 __all__ = ["CalibrationResult", "Identifiability", "calibrate", "identifiability"]
 
@@ -174,7 +176,7 @@ def _pose_residuals(robot: Robot, qs, Ts, f: int, wp, wo) -> jax.Array:
 
     def one(q, T):
         fp = forward_pass(robot, q)
-        e = _pose_residual(spatial.make_transform(fp.R[f], fp.p[f]), T)
+        e = pose_residual(spatial.make_transform(fp.R[f], fp.p[f]), T)
         return jnp.concatenate([e[:3] * wp, e[3:] * wo])
 
     return jax.vmap(one)(qs, Ts)
@@ -198,7 +200,7 @@ def _check_data(robot: Robot, qs: Any, Ts: Any, fn: str):
             f"{fn}: Ts_measured must have shape ({qs.shape[0]}, 4, 4) (one pose per row of qs), "
             f"got {Ts.shape}."
         )
-    if is_concrete((qs, Ts)) and not (np.all(np.isfinite(qs)) and np.all(np.isfinite(Ts))):
+    if not is_traced(qs, Ts) and not (np.all(np.isfinite(qs)) and np.all(np.isfinite(Ts))):
         raise JaxkinError(f"{fn}: qs and Ts_measured must be finite.")
     dtype = robot.dtype
     return qs.astype(dtype), Ts.astype(dtype)
@@ -256,7 +258,7 @@ def identifiability(
     """
     masks = _masks(robot, params)
     f = robot.frame_index(frame)
-    if not is_concrete((robot, qs)):
+    if is_traced(robot, qs):
         raise JaxkinError(
             "jk.identifiability works on concrete data (it returns Python lists): call it outside "
             "jit/vmap/grad. jk.calibrate calls it unless check_identifiable=False; inside a "
@@ -410,7 +412,7 @@ def calibrate(
                 "fits anyway (the fit then wanders along the unidentifiable directions)."
             )
     if optimizer is None:
-        optimizer = _default_optimizer()
+        optimizer = default_optimizer()
     masks_key = _masks_key(masks)
     dtype = robot.dtype
     wp = jnp.asarray(1.0 / position_sigma, dtype)

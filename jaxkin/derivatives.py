@@ -34,13 +34,11 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from .errors import RepresentationSingularityError
-from .jacobians import analytical_jacobian, check_reference, geometric_jacobian
-from .kinematics import check_q
+from ._checks import check_point, check_q, check_reference, result_dtype
+from .jacobians import analytical_jacobian_pass, jacobian_pass
 from .model import Robot
-from .representations import check_representation
+from .representations import check_representation, guard_singular
 
 __all__ = [
     "analytical_jacobian_dot",
@@ -51,15 +49,15 @@ __all__ = [
 ]
 
 
-def _dtype(robot: Robot, q: jax.Array):
-    return jnp.result_type(robot.base.dtype, q.dtype)
-
-
-def _q_qd(robot: Robot, q: Any, qd: Any, fn: str) -> tuple[jax.Array, jax.Array]:
-    q = check_q(robot, q, fn=fn)
-    qd = check_q(robot, qd, what="qd", fn=fn)
-    dtype = jnp.result_type(_dtype(robot, q), qd.dtype)
-    return q.astype(dtype), qd.astype(dtype)
+def _check_call(robot: Robot, q: Any, qd: Any, frame, point, reference: str, fn: str):
+    """Entry checks shared by the derivatives: ``(q, qd, frame index, point)``, one dtype."""
+    check_reference(reference)
+    hint = f"jax.vmap(lambda q, qd: {fn}(robot, q, qd))(qs, qds)"
+    q = check_q(robot, q, fn=fn, batch_hint=hint)
+    qd = check_q(robot, qd, what="qd", fn=fn, batch_hint=hint)
+    dtype = result_dtype(robot, q, qd)
+    pt = check_point(point, dtype, fn)
+    return q.astype(dtype), qd.astype(dtype), robot.frame_index(frame), pt
 
 
 def jacobian_dot(
@@ -87,12 +85,10 @@ def jacobian_dot(
     with ``rf`` LOCAL_WORLD_ALIGNED / LOCAL / WORLD for ``"world_aligned"`` / ``"local"`` /
     ``"world"``.
     """
-    check_reference(reference)
-    q, qd = _q_qd(robot, q, qd, "jk.jacobian_dot")
-    f = robot.frame_index(frame)
+    q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot")
 
     def J(qq):
-        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+        return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
     return jax.jvp(J, (q,), (qd,))[1]
 
@@ -112,12 +108,10 @@ def jacobian_dot_qd(
     ``qdd = 0``; add ``J @ qdd`` for the full acceleration. Shapes: ``q``, ``qd`` (dof,).
     Computed as one ``jax.jvp`` of the twist ``q -> J(q) @ qd`` (no (6, dof) matrix formed).
     """
-    check_reference(reference)
-    q, qd = _q_qd(robot, q, qd, "jk.jacobian_dot_qd")
-    f = robot.frame_index(frame)
+    q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot_qd")
 
     def V(qq):
-        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference) @ qd
+        return jacobian_pass(robot, qq, f, pt, reference).times(qd)
 
     return jax.jvp(V, (q,), (qd,))[1]
 
@@ -142,13 +136,10 @@ def kinematic_hessian(
     the Robotics Toolbox's ``hessian0(q)`` is (n, 6, n) and equals ``H`` for
     ``reference="world_aligned"`` at the tip.
     """
-    check_reference(reference)
-    q = check_q(robot, q, fn="jk.kinematic_hessian")
-    q = q.astype(_dtype(robot, q))
-    f = robot.frame_index(frame)
+    q, _, f, pt = _check_call(robot, q, q, frame, point, reference, "jk.kinematic_hessian")
 
     def J(qq):
-        return geometric_jacobian(robot, qq, frame=f, point=point, reference=reference)
+        return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
     dJ = jax.jacfwd(J)(q)  # (6, dof_j, dof_k)
     return jnp.transpose(dJ, (2, 0, 1))
@@ -158,19 +149,17 @@ def kinematic_hessian(
 def _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd):
     if return_margin:
         return Jad, margin
-    dtype = Jad.dtype
-    tol = float(np.sqrt(np.finfo(dtype).eps)) if singular_tol is None else float(singular_tol)
-    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((robot, q, qd)))
-    if not traced:
-        m = float(margin)
-        if m < tol:
-            raise RepresentationSingularityError(
-                f"the {representation!r} representation is singular here (margin {m:.3g} < "
-                f"{tol:.3g}): the analytical Jacobian and its derivative are unbounded. Use "
-                "jk.jacobian_dot (geometric), another representation, or return_margin=True."
-            )
-        return Jad
-    return jnp.where(margin < tol, jnp.full_like(Jad, jnp.nan), Jad)
+    return guard_singular(
+        Jad,
+        margin,
+        representation,
+        singular_tol,
+        "the analytical Jacobian and its derivative",
+        "jk.jacobian_dot (geometric)",
+        robot,
+        q,
+        qd,
+    )
 
 
 def analytical_jacobian_dot(
@@ -197,13 +186,11 @@ def analytical_jacobian_dot(
     ``(Jdot_a, margin)`` unmasked.
     """
     check_representation(representation)
-    q, qd = _q_qd(robot, q, qd, "jk.analytical_jacobian_dot")
-    f = robot.frame_index(frame)
+    fn = "jk.analytical_jacobian_dot"
+    q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
 
     def Ja(qq):
-        return analytical_jacobian(
-            robot, qq, representation, frame=f, point=point, return_margin=True
-        )
+        return analytical_jacobian_pass(robot, qq, f, pt, representation)
 
     (_, margin), (Jad, _) = jax.jvp(Ja, (q,), (qd,))
     return _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd)
@@ -223,13 +210,11 @@ def analytical_jacobian_dot_qd(
     """``Jdot_a @ qd``, shape (6,): ``d2/dt2 [p; phi]`` at ``qdd = 0`` (``phi`` in
     ``representation``). Singularities as in :func:`analytical_jacobian_dot`."""
     check_representation(representation)
-    q, qd = _q_qd(robot, q, qd, "jk.analytical_jacobian_dot_qd")
-    f = robot.frame_index(frame)
+    fn = "jk.analytical_jacobian_dot_qd"
+    q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
 
     def xd(qq):
-        Ja, margin = analytical_jacobian(
-            robot, qq, representation, frame=f, point=point, return_margin=True
-        )
+        Ja, margin = analytical_jacobian_pass(robot, qq, f, pt, representation)
         return Ja @ qd, margin
 
     (_, margin), (acc, _) = jax.jvp(xd, (q,), (qd,))

@@ -34,19 +34,23 @@ same message). ``throw=False`` returns the codes for you to inspect.
 from __future__ import annotations
 
 import enum
-import functools
+import warnings
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import spatial
-from ._jit import is_concrete, robot_jit
+from . import sampling, spatial
+from ._checks import check_poses, check_q, check_robot, is_traced, safe_norm
+from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .jacobians import _geometric
-from .kinematics import check_q, forward_pass, joint_placements
+from .jacobians import jacobian_pass
+from .kinematics import forward_pass
 from .model import Robot
+from .optimizers import default_optimizer
+from .placements import joint_placements
+from .pose_errors import pose_error_norms, pose_residual
 
 __all__ = ["RESULTS", "IKError", "IKSolution", "reach_bound", "sample_configurations", "solve_ik"]
 
@@ -138,20 +142,15 @@ def _reach_bound(robot: Robot, f: int) -> jax.Array:
     return total
 
 
-def _sampling_box(robot: Robot, dtype) -> tuple[jax.Array, jax.Array]:
-    """Limits with infinite ones replaced by [-pi, pi] (revolute) or [-1, 1] m (prismatic)."""
-    lo = robot.lower.astype(dtype)
-    hi = robot.upper.astype(dtype)
-    span = jnp.array([np.pi if k == "revolute" else 1.0 for k in robot.joint_kinds], dtype=dtype)
-    return jnp.where(jnp.isfinite(lo), lo, -span), jnp.where(jnp.isfinite(hi), hi, span)
-
-
 def sample_configurations(robot: Robot, key: jax.Array, n: int) -> jax.Array:
-    """``n`` configurations (n, dof) uniform within the joint limits (infinite limits: [-pi, pi]
-    for revolute, [-1, 1] m for prismatic joints)."""
-    lo, hi = _sampling_box(robot, robot.dtype)
-    u = jax.random.uniform(key, (n, robot.dof), dtype=robot.dtype)
-    return lo[None] + (hi - lo)[None] * u
+    """Deprecated: use :func:`jaxkin.sample_configurations` ``(robot, n, key)``."""
+    warnings.warn(
+        "jk.ik.sample_configurations(robot, key, n) is deprecated; use "
+        "jk.sample_configurations(robot, n, key).",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return sampling.sample_configurations(robot, n, key)
 
 
 def _pose(robot: Robot, q: jax.Array, f: int) -> jax.Array:
@@ -160,40 +159,8 @@ def _pose(robot: Robot, q: jax.Array, f: int) -> jax.Array:
 
 
 def _pose_and_jacobian(robot: Robot, q: jax.Array, f: int):
-    g = _geometric(robot, q, f, None, "world_aligned")  # one forward pass for both
+    g = jacobian_pass(robot, q, f, None, "world_aligned")  # one forward pass for both
     return g.pose(), g.matrix()
-
-
-def _pose_residual(T: jax.Array, T_target: jax.Array) -> jax.Array:
-    """``[p_t - p; w]`` (6,) with ``exp(skew(w)) = R_t R^T``: the residual the solvers iterate on.
-
-    The same as :func:`jaxkin.inverse_velocity.pose_error` except exactly at an orientation error
-    of pi, where the rotation axis is not recovered (``w = 0`` there): a cheaper logarithm without
-    ``log_so3``'s near-pi branch, which compiles several times faster inside the solver loop.
-    Final results are re-checked with the exact angle (:func:`_pose_errors`).
-    """
-    dp = T_target[:3, 3] - T[:3, 3]
-    M = T_target[:3, :3] @ T[:3, :3].T
-    a = spatial.vee(M)  # sin(theta) * axis
-    s2 = jnp.sum(a * a)
-    c = 0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0)
-    tiny = jnp.finfo(T.dtype).tiny
-    pos = s2 > tiny
-    s = jnp.where(pos, jnp.sqrt(jnp.where(pos, s2, 1.0)), 0.0)
-    theta = jnp.arctan2(s, c)
-    small = theta < 1e-3
-    t2 = theta * theta
-    factor = jnp.where(
-        small, 1.0 + t2 / 6.0 + 7.0 * t2 * t2 / 360.0, theta / jnp.where(pos, s, 1.0)
-    )
-    factor = jnp.where(pos | small, factor, 0.0)
-    return jnp.concatenate([dp, factor * a])
-
-
-def _safe_norm(x):
-    sq = jnp.sum(x * x)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def _damped_step(J: jax.Array, e: jax.Array, lam: jax.Array, free: jax.Array) -> jax.Array:
@@ -273,7 +240,7 @@ def _lm_lane_step(robot, f, T_target, seeds, unreachable, lane: _Lane, c) -> tup
     dq = _damped_step(lane.J, lane.e, lane.lam, ~blocked)
     q_trial = jnp.where(fresh, lane.q, jnp.clip(lane.q + dq, lo_p, hi_p))
     T_trial, J_trial = _pose_and_jacobian(robot, q_trial, f)
-    e_trial = _pose_residual(T_trial, T_target)
+    e_trial = pose_residual(T_trial, T_target)
     err_trial = jnp.sum(e_trial * e_trial)
     accept = fresh | (jnp.isfinite(err_trial) & (err_trial < lane.err))
     q = jnp.where(accept, q_trial, lane.q)
@@ -441,7 +408,7 @@ def _optax_one(robot, T_target, seeds, f, tol, max_steps, optimizer, patience, u
     tol2 = tol * tol
 
     def loss(q):
-        e = _pose_residual(_pose(robot, q, f), T_target)
+        e = pose_residual(_pose(robot, q, f), T_target)
         return 0.5 * jnp.sum(e * e)
 
     # Not optax.value_and_grad_from_state with a line search's store_grad=True: optax transposes
@@ -485,19 +452,10 @@ def _optax_one(robot, T_target, seeds, f, tol, max_steps, optimizer, patience, u
 
 
 # ----------------------------------------------------------------------------- entry point
-def _pose_errors(T: jax.Array, T_target: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Position error (m) and orientation error (rad, the angle of ``R_t R^T`` in [0, pi])."""
-    dp = T_target[:3, 3] - T[:3, 3]
-    M = T_target[:3, :3] @ T[:3, :3].T
-    s = _safe_norm(spatial.vee(M))  # sin(angle)
-    c = 0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0)  # cos(angle)
-    return _safe_norm(dp), jnp.arctan2(s, c)
-
-
 def _finish(robot, T_target, q, steps, seed, hit_max, unreachable, f, tol) -> IKSolution:
     """Errors, flags and result code of the final ``q`` of one target."""
-    ep, eo = _pose_errors(_pose(robot, q, f), T_target)
-    residual = _safe_norm(jnp.stack([ep, eo]))
+    ep, eo = pose_error_norms(_pose(robot, q, f), T_target)
+    residual = safe_norm(jnp.stack([ep, eo]))
     converged = residual <= tol
     code = jnp.where(
         converged,
@@ -535,7 +493,7 @@ def _starts(robot, q0, extra, key, n, num_seeds, dtype):
             extra = jnp.broadcast_to(extra[None], (n, *extra.shape))
     elif num_seeds > 1:
         k = jax.random.key(0) if key is None else key
-        extra = sample_configurations(robot, k, n * (num_seeds - 1)).astype(dtype)
+        extra = sampling.sample_configurations(robot, n * (num_seeds - 1), k, dtype=dtype)
         extra = extra.reshape(n, num_seeds - 1, robot.dof)
     starts = q0 if extra is None else jnp.concatenate([q0, extra], 1)
     return jnp.clip(starts, lo[None, None], hi[None, None])
@@ -563,7 +521,7 @@ def _solve_batch_impl(
     seeds = _starts(robot, q0, extra, key, T_all.shape[0], num_seeds, dtype)
     base_p = robot.base[:3, 3].astype(dtype)
     bound = _reach_bound(robot, f).astype(dtype)
-    dist = jax.vmap(lambda T: _safe_norm(T[:3, 3] - base_p))(T_all)
+    dist = jax.vmap(lambda T: safe_norm(T[:3, 3] - base_p))(T_all)
     unreachable = dist > bound * (1 + 1e-12) + tol
     if method == "lm":
         q, steps, seed, hit_max = _lm_queue(
@@ -579,41 +537,6 @@ def _solve_batch_impl(
 
 
 _solve_batch = robot_jit(_solve_batch_impl, ("f", "method", "optimizer", "lanes", "num_seeds"))
-
-
-def _check_targets(T: Any, fn: str, dtype) -> tuple[jax.Array, bool]:
-    shape = getattr(T, "shape", None)
-    if shape is None:
-        try:
-            T = np.asarray(T, dtype=float)
-        except (TypeError, ValueError):
-            raise ShapeError(f"{fn}: T_target must be a (4, 4) transform, got {T!r:.80}.") from None
-        shape = T.shape
-    shape = tuple(shape)
-    if shape == (4, 4):
-        batched = False
-    elif len(shape) == 3 and shape[1:] == (4, 4):
-        batched = True
-    else:
-        raise ShapeError(
-            f"{fn}: T_target must have shape (4, 4) (one target, T_world_frame) or (N, 4, 4) "
-            f"(a batch), got {shape}."
-        )
-    if is_concrete(T):
-        Tn = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
-        if not np.all(np.isfinite(Tn)):
-            raise JaxkinError(f"{fn}: T_target contains NaN or inf.")
-        R = Tn[:, :3, :3]
-        bad_R = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2)) > 1e-6
-        bad_row = np.abs(Tn[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > 1e-12
-        bad = np.flatnonzero(bad_R | bad_row | (np.linalg.det(R) < 0))
-        if bad.size:
-            raise JaxkinError(
-                f"{fn}: T_target{'' if not batched else f'[{int(bad[0])}]'} is not a rigid "
-                "transform (its rotation block must be orthonormal with det +1 to 1e-6 and its "
-                "last row [0, 0, 0, 1]). Build it with jk.fk or jk.spatial.make_transform."
-            )
-    return jnp.asarray(T, dtype=dtype), batched
 
 
 def solve_ik(
@@ -683,18 +606,15 @@ def solve_ik(
     ):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
             raise JaxkinError(f"{fn}: {name} must be an integer >= {lo}, got {val!r}.")
-    if not isinstance(robot, Robot):
-        raise ShapeError(
-            f"{fn} expects a jaxkin Robot as first argument, got {type(robot).__name__}."
-        )
+    check_robot(robot, fn)
     f = robot.frame_index(frame)
     dtype = np.dtype(robot.dtype)
-    T, batched = _check_targets(T_target, fn, dtype)
+    T, batched = check_poses(T_target, fn, "T_target", dtype)
     N = T.shape[0] if batched else 1
     q0 = jnp.asarray(q0) if hasattr(q0, "shape") else np.asarray(q0, dtype=float)
     if not (batched and tuple(q0.shape) == (N, robot.dof)):
         q0 = check_q(robot, q0, what="q0", fn=fn)
-    if is_concrete(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
+    if not is_traced(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
         raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
     if seeds is not None:
         shape = tuple(jnp.shape(seeds))
@@ -714,7 +634,7 @@ def solve_ik(
     if not tol > 0:
         raise JaxkinError(f"{fn}: tol must be > 0, got {tol!r}.")
     if method == "optax" and optimizer is None:
-        optimizer = _default_optimizer()
+        optimizer = default_optimizer()
     sol = _solve_batch(
         robot,
         T,
@@ -744,16 +664,6 @@ def _lanes(n: int) -> int:
     return n if n <= 64 else max(64, -(-n // 8))
 
 
-@functools.cache
-def _default_optimizer():
-    """L-BFGS with a backtracking line search (compiles about twice as fast as optax's default
-    zoom search), one object for the process: optimisers hash by identity in jit's cache. Shared
-    with :mod:`jaxkin.calibration`."""
-    import optax
-
-    return optax.lbfgs(linesearch=optax.scale_by_backtracking_linesearch(max_backtracking_steps=20))
-
-
 def _failure_message(result: np.ndarray, residual: np.ndarray) -> str | None:
     result = np.atleast_1d(np.asarray(result))
     residual = np.atleast_1d(np.asarray(residual))
@@ -770,7 +680,7 @@ def _failure_message(result: np.ndarray, residual: np.ndarray) -> str | None:
 
 
 def _raise_if_failed(sol: IKSolution) -> None:
-    if is_concrete((sol.result, sol.residual)):
+    if not is_traced((sol.result, sol.residual)):
         msg = _failure_message(np.asarray(sol.result), np.asarray(sol.residual))
         if msg:
             raise IKError(msg)

@@ -34,12 +34,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
+from ._checks import check_J_and_vector, check_q, is_traced, result_dtype, safe_norm
 from ._jit import robot_jit
-from .analysis import _check_J
 from .errors import JaxkinError, ShapeError
-from .jacobians import _geometric
-from .kinematics import check_q, forward_pass
+from .jacobians import jacobian_pass
+from .kinematics import forward_pass
 from .model import Robot
+from .pose_errors import pose_error
 
 __all__ = [
     "ResolvedRateResult",
@@ -54,23 +55,6 @@ __all__ = [
 
 
 # ----------------------------------------------------------------------------- validation
-def _check_Jv(J: Any, v: Any, fn: str) -> tuple[jax.Array, jax.Array]:
-    J = _check_J(J, fn)
-    Js = J.shape
-    vs = getattr(v, "shape", None)
-    if vs is None:
-        v = np.asarray(v, dtype=float)
-        vs = v.shape
-    if tuple(vs) != (Js[0],):
-        raise ShapeError(
-            f"{fn}: v must have shape ({Js[0]},) to match J's {Js[0]} rows (a twist [v; omega] "
-            f"for a geometric Jacobian), got {tuple(vs)}. Batch with jax.vmap."
-        )
-    v = jnp.asarray(v)
-    dtype = jnp.result_type(J.dtype, v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else J.dtype)
-    return J.astype(dtype), v.astype(dtype)
-
-
 def _weight_factor(W: Any, n: int, what: str, fn: str, dtype):
     """``L`` with ``W = L L^T`` (lower Cholesky factor), or the sqrt of a diagonal; None if W is
     None. Returns ("diag", sqrt_w) or ("full", L)."""
@@ -134,7 +118,7 @@ def pinv_velocity(
     SPD matrices. ``v`` is in the Jacobian's reference and row order (``[v; omega]``).
     """
     fn = "jk.pinv_velocity"
-    J, v = _check_Jv(J, v, fn)
+    J, v = check_J_and_vector(J, v, fn)
     Wx = _weight_factor(task_weights, J.shape[0], "task_weights", fn, J.dtype)
     Wq = _weight_factor(joint_weights, J.shape[1], "joint_weights", fn, J.dtype)
     Jt, vt, back = _apply_weights(J, v, Wx, Wq)
@@ -180,11 +164,11 @@ def damped_least_squares(
       joint_weights, task_weights: positive vectors or SPD matrices (see the module doc).
     """
     fn = "jk.damped_least_squares"
-    J, v = _check_Jv(J, v, fn)
+    J, v = check_J_and_vector(J, v, fn)
     lam = jnp.asarray(damping, dtype=J.dtype)
     if lam.shape != ():
         raise ShapeError(f"{fn}: damping must be a scalar, got shape {lam.shape}.")
-    if not isinstance(lam, jax.core.Tracer) and not float(lam) >= 0.0:
+    if not is_traced(lam) and not float(lam) >= 0.0:
         raise JaxkinError(f"{fn}: damping must be >= 0, got {float(lam)}.")
     Wx = _weight_factor(task_weights, J.shape[0], "task_weights", fn, J.dtype)
     Wq = _weight_factor(joint_weights, J.shape[1], "joint_weights", fn, J.dtype)
@@ -267,7 +251,7 @@ def null_space_velocity(
     joint-limit avoidance gradient) only the part that does not disturb the task is added.
     """
     fn = "jk.null_space_velocity"
-    J, v = _check_Jv(J, v, fn)
+    J, v = check_J_and_vector(J, v, fn)
     qd0 = jnp.asarray(qd_secondary, dtype=J.dtype)
     if qd0.shape != (J.shape[1],):
         raise ShapeError(
@@ -278,17 +262,6 @@ def null_space_velocity(
 
 
 # ----------------------------------------------------------------------------- resolved rate
-def pose_error(T: Any, T_desired: Any) -> jax.Array:
-    """Pose error ``[p_d - p; log(R_d R^T)]`` (6,), world axes: the twist (times 1 s) that moves
-    pose ``T`` to ``T_desired`` along a screw-free path (position straight, orientation about a
-    fixed world axis). NaN-free, also at zero error (``log_so3``'s Taylor branch)."""
-    T = jnp.asarray(T)
-    Td = jnp.asarray(T_desired)
-    dp = Td[:3, 3] - T[:3, 3]
-    dw = spatial.log_so3(Td[:3, :3] @ T[:3, :3].T)
-    return jnp.concatenate([dp, dw])
-
-
 class ResolvedRateResult(NamedTuple):
     """Output of :func:`resolved_rate_control` for a path of N poses.
 
@@ -305,12 +278,6 @@ class ResolvedRateResult(NamedTuple):
     orientation_error: jax.Array
     max_position_error: jax.Array
     max_orientation_error: jax.Array
-
-
-def _safe_norm(x):
-    sq = jnp.sum(x * x)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def _path_twists(Ts: jax.Array, dt: jax.Array) -> jax.Array:
@@ -333,7 +300,7 @@ def _resolved_rate_impl(robot, q0, Ts, Vs, dt, gain, damping, *, frame, rcond, c
 
     def step(q, x):
         Td, Vd, Td_next = x
-        g = _geometric(robot, q, frame, None, "world_aligned")  # J and pose from one pass
+        g = jacobian_pass(robot, q, frame, None, "world_aligned")  # J and pose from one pass
         J, T = g.matrix(), g.pose()
         V = Vd + gain * pose_error(T, Td)
         if rcond is None:
@@ -346,7 +313,7 @@ def _resolved_rate_impl(robot, q0, Ts, Vs, dt, gain, damping, *, frame, rcond, c
         fp2 = forward_pass(robot, q_next)
         T2 = spatial.make_transform(fp2.R[frame], fp2.p[frame])
         e = pose_error(T2, Td_next)
-        return q_next, (q_next, qd, _safe_norm(e[:3]), _safe_norm(e[3:]))
+        return q_next, (q_next, qd, safe_norm(e[:3]), safe_norm(e[3:]))
 
     Ts_next = jnp.concatenate([Ts[1:], Ts[-1:]], axis=0)
     _, (qs, qds, ep, eo) = jax.lax.scan(step, q0, (Ts, Vs, Ts_next))
@@ -396,7 +363,7 @@ def resolved_rate_control(
     """
     fn = "jk.resolved_rate_control"
     q0 = check_q(robot, q0, what="q0", fn=fn)
-    dtype = jnp.result_type(robot.base.dtype, q0.dtype)
+    dtype = result_dtype(robot, q0)
     Ts = jnp.asarray(T_path, dtype=dtype)
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
         raise ShapeError(f"{fn}: T_path must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")

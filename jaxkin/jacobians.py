@@ -28,49 +28,36 @@ import numpy as np
 
 from . import _fold as fold
 from . import spatial
+from ._checks import (
+    REFERENCES,
+    check_point,
+    check_q,
+    check_reference,
+    is_traced,
+    result_dtype,
+)
 from .errors import JaxkinError, ShapeError
-from .kinematics import check_q, frame_pose, scalar_pass, scan_pass, uses_scan
+from .kinematics import frame_pose, scalar_pass, scan_pass, uses_scan
 from .model import Robot
+from .representations import (
+    check_representation,
+    from_matrix,
+    guard_singular,
+    representation_margin,
+)
 
 __all__ = [
     "REFERENCES",
+    "FrameJacobian",
     "analytical_jacobian",
+    "analytical_jacobian_pass",
     "change_reference",
-    "check_reference",
+    "frame_jacobian",
     "geometric_jacobian",
     "jacobian_fwd",
+    "jacobian_pass",
     "jacobian_rev",
 ]
-
-REFERENCES = ("world_aligned", "local", "world")
-
-
-def check_reference(reference: str) -> str:
-    if reference not in REFERENCES:
-        raise JaxkinError(
-            f"reference must be one of {REFERENCES}, got {reference!r}. 'world_aligned' is the "
-            "textbook's geometric Jacobian (frame origin, world axes)."
-        )
-    return reference
-
-
-def _check_point(point: Any, dtype) -> jax.Array | None:
-    if point is None:
-        return None
-    shape = getattr(point, "shape", None)
-    if shape is None:
-        try:
-            point = np.asarray(point, dtype=float)
-        except (TypeError, ValueError):
-            raise ShapeError(
-                f"point must be 3 numbers (in the frame's axes), got {point!r}."
-            ) from None
-        shape = point.shape
-    if tuple(shape) != (3,):
-        raise ShapeError(
-            f"point must have shape (3,) (an offset in the frame's own axes), got {tuple(shape)}."
-        )
-    return jnp.asarray(point, dtype=dtype)
 
 
 def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
@@ -101,7 +88,7 @@ def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
 
 def _multipliers(robot: Robot) -> list:
     m = robot.multiplier
-    if isinstance(m, jax.core.Tracer):
+    if is_traced(m):
         return [m[j] for j in range(robot.n_joints)]
     return [float(x) for x in np.asarray(m, dtype=np.float64)]
 
@@ -135,16 +122,48 @@ def geometric_jacobian(
         own axes; the linear rows then give that point's velocity.
       reference: ``"world_aligned"`` (default), ``"local"`` or ``"world"``; see the module doc.
     """
+    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.geometric_jacobian")
+    return jacobian_pass(robot, q, f, pt, reference).matrix()
+
+
+def frame_jacobian(
+    robot: Robot,
+    q: Any,
+    frame: int | str | None = None,
+    point: Any = None,
+    reference: str = "world_aligned",
+) -> tuple[jax.Array, jax.Array]:
+    """``(J, T)``: the geometric Jacobian (6, dof) of :func:`geometric_jacobian` and the frame's
+    pose ``T_world_frame`` (4, 4) (its origin, not ``point``), from one forward pass.
+
+    For solvers and controllers that need both at every step (IK, resolved-rate control,
+    calibration); as pytorch_kinematics' ``jacobian(..., ret_eef_pose=True)``.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("puma560")
+    >>> J, T = jk.jacobians.frame_jacobian(robot, jnp.zeros(6))
+    >>> J.shape, T.shape
+    ((6, 6), (4, 4))
+    """
+    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.frame_jacobian")
+    g = jacobian_pass(robot, q, f, pt, reference)
+    return g.matrix(), g.pose()
+
+
+def _check_frame_call(robot, q, frame, point, reference, fn):
+    """The checks shared by every Jacobian entry point: ``(q, frame index, point)``."""
     check_reference(reference)
-    q = check_q(robot, q, fn="jk.geometric_jacobian")
-    g = _geometric(robot, q, robot.frame_index(frame), point, reference)
-    return g.matrix()
+    q = check_q(robot, q, fn=fn)
+    return q, robot.frame_index(frame), check_point(point, result_dtype(robot, q), fn)
 
 
-class _Geometric(NamedTuple):
+class FrameJacobian(NamedTuple):
     """The geometric Jacobian of one frame, before assembly: columns as scalar 3-vectors (short
     robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's pose
-    (``R``, origin ``p``) from the same forward pass."""
+    (``R``, origin ``p``, world coordinates) from the same forward pass.
+
+    ``matrix()`` (6, dof), ``times(qd)`` = ``J @ qd`` (6,) without forming J, ``rotation()``
+    (3, 3), ``pose()`` (4, 4) ``T_world_frame``."""
 
     Jv: Any
     Jw: Any
@@ -181,11 +200,19 @@ class _Geometric(NamedTuple):
         return spatial.make_transform(self.rotation(), p)
 
 
-def _geometric(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
+def jacobian_pass(
+    robot: Robot, q: jax.Array, f: int, point: jax.Array | None, reference: str
+) -> FrameJacobian:
+    """The kernel behind every geometric Jacobian: one forward pass, columns of frame index ``f``
+    at ``point`` (checked offset (3,) in the frame's axes, or None) in ``reference``.
+
+    ``q`` must be checked (:func:`geometric_jacobian` and :func:`frame_jacobian` are the checked
+    entry points); nothing is checked again here, so solvers call it inside their loops.
+    """
     if uses_scan(robot):
-        return _geometric_scan(robot, q, f, point, reference)
+        return _jacobian_pass_scan(robot, q, f, point, reference)
     sp = scalar_pass(robot, q)
-    pt = _check_point(point, sp.dtype)
+    pt = None if point is None else point.astype(sp.dtype)
     R, p = sp.R[f], sp.p[f]
     target = p if pt is None else fold.vadd(p, fold.matvec(R, tuple(pt[i] for i in range(3))))
     Jv, Jw = _columns(robot, sp, target, f)
@@ -196,16 +223,15 @@ def _geometric(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
     elif reference == "world":
         # velocity of the point at the world origin: v_target - omega x target
         Jv = [fold.vadd(v, fold.cross(target, w)) for v, w in zip(Jv, Jw, strict=True)]
-    return _Geometric(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
+    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
 
 
-def _geometric_scan(robot: Robot, q, f: int, point, reference: str) -> _Geometric:
+def _jacobian_pass_scan(robot: Robot, q, f: int, point, reference: str) -> FrameJacobian:
     """Table 4.1 vectorised over the joints of a long chain (see ``kinematics.scan_pass``)."""
     fp = scan_pass(robot, q)
     dtype = fp.p.dtype
     R, p = fp.R[f], fp.p[f]
-    pt = _check_point(point, dtype)
-    target = p if pt is None else p + R @ pt
+    target = p if point is None else p + R @ point.astype(dtype)
     kinds = np.array(robot.kinds)
     on_path = np.zeros(robot.n_joints, dtype=bool)
     on_path[list(robot.ancestors(f))] = True
@@ -221,7 +247,7 @@ def _geometric_scan(robot: Robot, q, f: int, point, reference: str) -> _Geometri
         Jv, Jw = R.T @ Jv, R.T @ Jw
     elif reference == "world":
         Jv = Jv + spatial.skew(target) @ Jw
-    return _Geometric(Jv=Jv, Jw=Jw, R=R, p=p, dtype=dtype)
+    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=dtype)
 
 
 def change_reference(
@@ -277,13 +303,10 @@ def _jacobian_from_derivs(p, R, dp, dR, reference):
 
 
 def _autodiff_jacobian(robot, q, frame, point, reference, mode, fn):
-    check_reference(reference)
-    q = check_q(robot, q, fn=fn)
-    f = robot.frame_index(frame)
-    pt = _check_point(point, jnp.result_type(robot.base.dtype, q.dtype))
+    q, f, pt = _check_frame_call(robot, q, frame, point, reference, fn)
     pose = _pose_twist_fn(robot, f, pt, reference)
     jac = jax.jacfwd if mode == "fwd" else jax.jacrev
-    dp, dR = jac(pose)(q.astype(jnp.result_type(robot.base.dtype, q.dtype)))
+    dp, dR = jac(pose)(q.astype(result_dtype(robot, q)))
     p, R = pose(q.astype(dp.dtype))
     return _jacobian_from_derivs(p, R, dp, dR, reference)
 
@@ -300,11 +323,6 @@ def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") ->
 def jacobian_rev(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
     """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, dof)."""
     return _autodiff_jacobian(robot, q, frame, point, reference, "rev", "jk.jacobian_rev")
-
-
-def _is_traced(*trees) -> bool:
-    leaves = jax.tree_util.tree_leaves(trees)
-    return any(isinstance(x, jax.core.Tracer) for x in leaves)
 
 
 def analytical_jacobian(
@@ -344,20 +362,41 @@ def analytical_jacobian(
       all NaN, so it can never pass for a number; pass ``return_margin=True`` to get
       ``(J_a, margin)`` instead, unmasked, and filter yourself.
     """
-    from .errors import RepresentationSingularityError
-    from .representations import check_representation, from_matrix, representation_margin
-
     check_representation(representation)
     if method not in ("chain", "jacfwd"):
         raise JaxkinError(f"method must be 'chain' or 'jacfwd', got {method!r}.")
-    q = check_q(robot, q, fn="jk.analytical_jacobian")
-    f = robot.frame_index(frame)
-    dtype = jnp.result_type(robot.base.dtype, q.dtype)
-    pt = _check_point(point, dtype)
+    q, f, pt = _check_frame_call(robot, q, frame, point, "world_aligned", "jk.analytical_jacobian")
+    Ja, margin = analytical_jacobian_pass(robot, q, f, pt, representation, method)
+    if return_margin:
+        return Ja, margin
+    return guard_singular(
+        Ja,
+        margin,
+        representation,
+        singular_tol,
+        "the analytical Jacobian",
+        "jk.geometric_jacobian",
+        robot,
+        q,
+    )
+
+
+def analytical_jacobian_pass(
+    robot: Robot,
+    q: jax.Array,
+    f: int,
+    point: jax.Array | None,
+    representation: str,
+    method: str = "chain",
+) -> tuple[jax.Array, jax.Array]:
+    """The kernel of :func:`analytical_jacobian` on checked arguments: ``(J_a (6, dof), margin)``,
+    unmasked (see :func:`jacobian_pass` for the arguments)."""
+    pt = point
+    dtype = result_dtype(robot, q)
     to_phi = lambda R: from_matrix(R, representation)  # noqa: E731
 
     if method == "chain":
-        g = _geometric(robot, q, f, point, "world_aligned")
+        g = jacobian_pass(robot, q, f, pt, "world_aligned")
         J = g.matrix()
         R = g.rotation()
         phi = to_phi(R)
@@ -383,19 +422,4 @@ def analytical_jacobian(
             return jnp.concatenate([p, phi]), phi
 
         Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(q.astype(dtype))
-    margin = representation_margin(phi, representation)
-    if return_margin:
-        return Ja, margin
-    tol = float(np.sqrt(np.finfo(dtype).eps)) if singular_tol is None else float(singular_tol)
-    if not _is_traced(robot, q):
-        m = float(margin)
-        if m < tol:
-            names = {"rpy": "pitch = +-pi/2", "zyz": "theta = 0 or pi", "rotvec": "|w| = 2 pi"}
-            raise RepresentationSingularityError(
-                f"the {representation!r} representation is singular here ({names[representation]}; "
-                f"margin {m:.3g} < {tol:.3g}, phi = {np.asarray(phi).tolist()}): the analytical "
-                "Jacobian is unbounded. Use jk.geometric_jacobian, another representation, or "
-                "return_margin=True to get the raw values with their margin."
-            )
-        return Ja
-    return jnp.where(margin < tol, jnp.full_like(Ja, jnp.nan), Ja)
+    return Ja, representation_margin(phi, representation)

@@ -15,148 +15,21 @@ import numpy as np
 
 from . import _fold as fold
 from . import spatial
-from .errors import ShapeError
+from ._checks import check_q, is_traced, result_dtype
 from .model import Robot
+from .placements import joint_placements
 
 __all__ = [
     "ForwardPass",
     "ScalarPass",
-    "check_q",
     "fk",
     "fk_all",
     "forward_pass",
     "frame_pose",
-    "joint_placements",
     "scalar_pass",
     "scan_pass",
     "uses_scan",
 ]
-
-
-def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function") -> jax.Array:
-    """Validate a joint vector (before tracing) and return it as a float array of shape (dof,)."""
-    if not isinstance(robot, Robot):
-        raise ShapeError(
-            f"{fn} expects a jaxkin Robot as first argument, got {type(robot).__name__}."
-        )
-    if isinstance(q, (list, tuple)):
-        try:
-            q = np.asarray(q, dtype=float)
-        except (TypeError, ValueError):
-            raise ShapeError(f"{what} must be a sequence of numbers, got {q!r}.") from None
-    if not (hasattr(q, "shape") and hasattr(q, "dtype")):
-        try:
-            q = np.asarray(q)
-        except (TypeError, ValueError):
-            raise ShapeError(f"{what} must be an array of numbers, got {q!r}.") from None
-    shape = q.shape
-    dtype = np.dtype(q.dtype)
-    if dtype.kind == "c":
-        raise ShapeError(f"{what} must be real, got complex dtype {dtype}.")
-    if dtype.kind not in "fiub":
-        raise ShapeError(f"{what} must be an array of numbers, got dtype {dtype} ({q!r:.60}).")
-    if tuple(shape) != (robot.dof,):
-        hint = ""
-        if len(shape) >= 2 and shape[-1] == robot.dof:
-            hint = (
-                f" For a batch of configurations use jax.vmap, e.g. "
-                f"jax.vmap(lambda q: {fn}(robot, q))(qs)."
-            )
-        elif len(shape) == 1:
-            hint = f" Give one value per joint {list(robot.joint_names)}."
-        raise ShapeError(
-            f"{fn}: {what} must have shape ({robot.dof},) for robot {robot.name!r} "
-            f"({robot.dof} joints), got shape {tuple(shape)}.{hint}"
-        )
-    q = jnp.asarray(q)
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = q.astype(robot.dtype)
-    return q
-
-
-def _result_dtype(robot: Robot, q: jax.Array):
-    return jnp.result_type(robot.base.dtype, q.dtype)
-
-
-class JointPlacements(NamedTuple):
-    """Constant parts of every joint's transform, computed once per call from the leaves.
-
-    ``B`` (before the motion) and ``A`` (after it) are ``(R, p)`` pairs of shape (n, 3, 3) and
-    (n, 3), or None when the parameterisation makes them the identity.
-    """
-
-    B: tuple[Any, Any] | None
-    A: tuple[Any, Any] | None
-
-
-def _dh_standard(params, xp):
-    a, alpha, d, theta = (params[k] for k in ("a", "alpha", "d", "theta"))
-    ct, st, ca, sa = xp.cos(theta), xp.sin(theta), xp.cos(alpha), xp.sin(alpha)
-    z = xp.zeros_like(a)
-    # Rz(theta) Tz(d) Tx(a) Rx(alpha)
-    R = xp.stack(
-        [
-            xp.stack([ct, -st * ca, st * sa], -1),
-            xp.stack([st, ct * ca, -ct * sa], -1),
-            xp.stack([z, sa, ca], -1),
-        ],
-        -2,
-    )
-    p = xp.stack([a * ct, a * st, d], -1)
-    return R, p
-
-
-def _dh_modified(params, xp):
-    a, alpha, d, theta = (params[k] for k in ("a", "alpha", "d", "theta"))
-    ct, st, ca, sa = xp.cos(theta), xp.sin(theta), xp.cos(alpha), xp.sin(alpha)
-    z = xp.zeros_like(a)
-    # Rx(alpha) Tx(a) Rz(theta) Tz(d)
-    R = xp.stack(
-        [
-            xp.stack([ct, -st, z], -1),
-            xp.stack([ca * st, ca * ct, -sa], -1),
-            xp.stack([sa * st, sa * ct, ca], -1),
-        ],
-        -2,
-    )
-    p = xp.stack([a, -sa * d, ca * d], -1)
-    return R, p
-
-
-def _rpy(rpy, xp):
-    r, p, y = rpy[..., 0], rpy[..., 1], rpy[..., 2]
-    cr, sr, cp, sp, cy, sy = xp.cos(r), xp.sin(r), xp.cos(p), xp.sin(p), xp.cos(y), xp.sin(y)
-    # Rz(yaw) Ry(pitch) Rx(roll)
-    return xp.stack(
-        [
-            xp.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-            xp.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-            xp.stack([-sp, cp * sr, cp * cr], -1),
-        ],
-        -2,
-    )
-
-
-def joint_placements(robot: Robot, dtype=None, xp=jnp) -> JointPlacements:
-    """The constant placements ``B_j`` and ``A_j`` of every joint (see :mod:`jaxkin.model`).
-
-    ``xp`` is ``jax.numpy`` (traced leaves) or ``numpy`` (concrete leaves, in float64).
-    """
-    if xp is jnp:
-        dtype = dtype or robot.dtype
-        params = {k: v.astype(dtype) for k, v in robot.params.items()}
-    else:
-        params = {k: np.asarray(v, dtype=np.float64) for k, v in robot.params.items()}
-    kind = robot.parameterisation
-    if kind == "dh_standard":
-        return JointPlacements(B=None, A=_dh_standard(params, xp))
-    if kind == "dh_modified":
-        return JointPlacements(B=_dh_modified(params, xp), A=None)
-    return JointPlacements(B=(_rpy(params["rpy"], xp), params["xyz"]), A=None)
-
-
-def _is_concrete(tree) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 class _Constants(NamedTuple):
@@ -198,7 +71,7 @@ def _constants(robot: Robot, dtype) -> _Constants:
     robot, ``grad`` with respect to its parameters, ``vmap`` over a stack of robots) they are JAX
     scalars and new values never retrace.
     """
-    if _is_concrete(robot):
+    if not is_traced(robot):
         xp, conv = np, lambda a: np.asarray(a, dtype=np.float64)
         to_scalar = _snap
     else:
@@ -265,7 +138,7 @@ def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
     Each joint's sin and cos are computed once; placements are composed entry by entry, so XLA
     fuses the kernel into a single loop over a batch. ``q`` must be validated (``check_q``).
     """
-    dtype = _result_dtype(robot, q)
+    dtype = result_dtype(robot, q)
     q = q.astype(dtype)
     K = _constants(robot, dtype)
     qv = [q[i] for i in range(robot.dof)]
@@ -332,7 +205,7 @@ def scan_pass(robot: Robot, q: jax.Array) -> ForwardPass:
     axis and a translation by ``is_prismatic * value`` along it, then ``A`` (fixed joints have
     both flags 0). Compile time does not grow with the number of joints.
     """
-    dtype = _result_dtype(robot, q)
+    dtype = result_dtype(robot, q)
     q = q.astype(dtype)
     n = robot.n_joints
     place = joint_placements(robot, dtype)

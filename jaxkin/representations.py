@@ -18,17 +18,22 @@ For a representation ``phi`` of ``R``, the angular velocity in world axes is
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import spatial
-from .errors import JaxkinError, ShapeError
+from ._checks import error_if
+from .errors import JaxkinError, RepresentationSingularityError, ShapeError
 
 __all__ = [
     "REPRESENTATIONS",
     "analytical_from_geometric",
     "check_representation",
     "from_matrix",
+    "guard_singular",
     "rate_matrix",
     "rate_matrix_autodiff",
     "representation_margin",
@@ -47,6 +52,39 @@ def check_representation(representation: str) -> str:
             f"representation must be one of {REPRESENTATIONS}, got {representation!r}."
         )
     return representation
+
+
+_SINGULAR_AT = {"rpy": "pitch = +-pi/2", "zyz": "theta = 0 or pi", "rotvec": "|w| = 2 pi"}
+
+
+def guard_singular(
+    value: Any,
+    margin: jax.Array,
+    representation: str,
+    singular_tol: float | None,
+    what: str,
+    instead: str,
+    *trees: Any,
+) -> Any:
+    """The analytical-Jacobian singularity policy, written once.
+
+    With ``tol = singular_tol`` (default: sqrt of the dtype's machine epsilon), ``margin < tol``
+    raises :class:`~jaxkin.RepresentationSingularityError` eagerly (``what`` is unbounded; the
+    message suggests ``instead``); when ``margin`` or ``trees`` are traced the ``value`` becomes
+    all NaN there instead.
+    """
+    dtype = jnp.asarray(margin).dtype
+    tol = float(np.sqrt(np.finfo(dtype).eps)) if singular_tol is None else float(singular_tol)
+
+    def error() -> Exception:
+        return RepresentationSingularityError(
+            f"the {representation!r} representation is singular here "
+            f"({_SINGULAR_AT[representation]}; margin {float(margin):.3g} < {tol:.3g}): {what} "
+            f"is unbounded. Use {instead}, another representation, or return_margin=True to get "
+            "the raw values with their margin."
+        )
+
+    return error_if(margin < tol, error, value, margin, *trees)
 
 
 def _check_phi(phi) -> jax.Array:

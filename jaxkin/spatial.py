@@ -114,16 +114,54 @@ def rpy_to_matrix(rpy: Array) -> Array:
     return rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
 
 
+def _euler_outer(a: Array, b: Array) -> tuple[Array, Array, Array]:
+    """Shared by :func:`matrix_to_rpy` and :func:`matrix_to_zyz`.
+
+    ``(a, b) = n * (cos, sin)(outer)`` are two entries of the matrix, with ``n >= 0`` cos(pitch)
+    resp. sin(theta) and ``outer`` yaw resp. phi. Returns ``(n, outer, near)``: ``sqrt(a^2 + b^2)``
+    and ``arctan2(b, a)``, bit for bit, except at exact gimbal lock (``a^2 + b^2`` below the
+    smallest normal number), where both are 0 (the convention) and a double ``where`` keeps their
+    gradients finite; ``near`` flags ``n < 1e-2`` (``1e-1`` in float32), where the caller takes the
+    inner angle from the matrix de-rotated by ``outer``.
+    """
+    n_sq = a**2 + b**2
+    locked = n_sq < jnp.finfo(n_sq.dtype).tiny
+    near = n_sq < (1e-4 if jnp.finfo(n_sq.dtype).bits == 64 else 1e-2)
+    zero, one = jnp.zeros_like(n_sq), jnp.ones_like(n_sq)
+    n = jnp.where(locked, zero, jnp.sqrt(jnp.where(locked, one, n_sq)))
+    safe_b, safe_a = jnp.where(locked, zero, b), jnp.where(locked, one, a)
+    outer = jnp.where(locked, zero, jnp.arctan2(safe_b, safe_a))
+    return n, outer, near
+
+
+def _safe_arctan2(near: Array, y: Array, x: Array) -> Array:
+    # arctan2(y, x) for the "far" branch; (0, 1) where it is not used (y = x = 0 at the lock).
+    return jnp.arctan2(jnp.where(near, jnp.zeros_like(y), y), jnp.where(near, jnp.ones_like(x), x))
+
+
 def matrix_to_rpy(R: Array) -> Array:
     """``(roll, pitch, yaw)`` of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, pitch in [-pi/2, pi/2].
 
-    Singular at pitch = +-pi/2 (roll and yaw are then not unique and their derivatives are
-    unbounded); see :func:`jaxkin.representations.representation_margin`.
+    ``rpy_to_matrix(matrix_to_rpy(R))`` rebuilds ``R`` to rounding everywhere, gimbal lock
+    included. At pitch = +-pi/2 exactly (``R[0, 0] == R[1, 0] == 0``) only roll - yaw (pitch
+    +pi/2) resp. roll + yaw (pitch -pi/2) is determined; the convention there is **yaw = 0**
+    (as Pinocchio's ``matrixToRpy``), so ``roll = atan2(-R[1, 2], R[1, 1])``. Near the lock
+    (``cos(pitch) < 1e-2``, ``1e-1`` in float32) roll is taken from ``Rz(yaw)^T R`` so that it
+    stays consistent with yaw, which rounding errors of ``R`` then perturb; elsewhere the result
+    is the plain ``atan2`` formulas' (yaw from column 0, roll from row 2).
+
+    Values and gradients are finite everywhere, but roll and yaw and their derivatives are
+    unbounded near the lock; see :func:`jaxkin.representations.representation_margin`.
     """
     R = jnp.asarray(R)
-    yaw = jnp.arctan2(R[1, 0], R[0, 0])
-    pitch = jnp.arctan2(-R[2, 0], jnp.sqrt(R[0, 0] ** 2 + R[1, 0] ** 2))
-    roll = jnp.arctan2(R[2, 1], R[2, 2])
+    if not jnp.issubdtype(R.dtype, jnp.floating):
+        R = R.astype(jnp.result_type(float))
+    cos_p, yaw, near = _euler_outer(R[0, 0], R[1, 0])
+    pitch = jnp.arctan2(-R[2, 0], cos_p)
+    # Near the lock: row 1 of Rz(yaw)^T R = Ry(pitch) Rx(roll) is (0, cos(roll), -sin(roll)).
+    sy, cy = jnp.sin(yaw), jnp.cos(yaw)
+    roll_near = jnp.arctan2(sy * R[0, 2] - cy * R[1, 2], cy * R[1, 1] - sy * R[0, 1])
+    roll = jnp.where(near, roll_near, _safe_arctan2(near, R[2, 1], R[2, 2]))
     return jnp.stack([roll, pitch, yaw])
 
 
@@ -136,12 +174,25 @@ def zyz_to_matrix(zyz: Array) -> Array:
 def matrix_to_zyz(R: Array) -> Array:
     """``(phi, theta, psi)`` of ``R = Rz(phi) Ry(theta) Rz(psi)``, theta in [0, pi].
 
-    Singular at theta = 0 and theta = pi (phi and psi are then not unique).
+    ``zyz_to_matrix(matrix_to_zyz(R))`` rebuilds ``R`` to rounding everywhere, gimbal lock
+    included. At theta = 0 or pi exactly (``R[0, 2] == R[1, 2] == 0``) only phi + psi (theta 0)
+    resp. psi - phi (theta pi) is determined; the convention there is **phi = 0** (as
+    spatialmath's ``tr2eul``), so ``psi = atan2(R[1, 0], R[1, 1])``. Near the lock
+    (``sin(theta) < 1e-2``, ``1e-1`` in float32) psi is taken from ``Rz(phi)^T R``; elsewhere the
+    result is the plain ``atan2`` formulas' (phi from column 2, psi from row 2).
+
+    Values and gradients are finite everywhere, but phi and psi and their derivatives are
+    unbounded near the lock.
     """
     R = jnp.asarray(R)
-    theta = jnp.arctan2(jnp.sqrt(R[0, 2] ** 2 + R[1, 2] ** 2), R[2, 2])
-    phi = jnp.arctan2(R[1, 2], R[0, 2])
-    psi = jnp.arctan2(R[2, 1], -R[2, 0])
+    if not jnp.issubdtype(R.dtype, jnp.floating):
+        R = R.astype(jnp.result_type(float))
+    sin_t, phi, near = _euler_outer(R[0, 2], R[1, 2])
+    theta = jnp.arctan2(sin_t, R[2, 2])
+    # Near the lock: row 1 of Rz(phi)^T R = Ry(theta) Rz(psi) is (sin(psi), cos(psi), 0).
+    sf, cf = jnp.sin(phi), jnp.cos(phi)
+    psi_near = jnp.arctan2(cf * R[1, 0] - sf * R[0, 0], cf * R[1, 1] - sf * R[0, 1])
+    psi = jnp.where(near, psi_near, _safe_arctan2(near, R[2, 1], -R[2, 0]))
     return jnp.stack([phi, theta, psi])
 
 

@@ -56,7 +56,6 @@ it; the same facts are attributes of the exception.
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import math
 import os
@@ -67,9 +66,7 @@ from pathlib import Path
 from typing import Any
 from xml.parsers import expat
 
-import jax.numpy as jnp
-import numpy as np
-
+from .build import MimicError, resolve_mimics
 from .errors import ModelError
 from .model import Robot
 
@@ -752,79 +749,56 @@ def _topology(ctx: _Context, links: list[URDFLink], joints: list[URDFJoint]) -> 
 def _resolve_mimics(
     ctx: _Context, joints: Sequence[URDFJoint]
 ) -> dict[str, tuple[str, float, float]]:
-    """Validate every ``<mimic>`` and resolve each moving mimic joint to the independent joint
-    at the end of its chain: ``{name: (leader, M, O)}`` with ``value = M * q[leader] + O``.
-
-    Linear time (each joint is resolved once, memoised) and iterative.
-    """
+    """Validate every ``<mimic>`` of the file (:func:`jaxkin.build.resolve_mimics`), with the
+    line of the offending ``<mimic>`` in the error. A ``<mimic>`` on a fixed joint is ignored, as
+    urdfdom and Pinocchio do (Talos' grippers have such joints), once its leader exists."""
     by_name = {j.name: j for j in joints}
-    resolved: dict[str, tuple[str, float, float]] = {}
-
-    def missing(j: URDFJoint, fix: str) -> URDFError:
-        leader = j.mimic.joint
-        return ctx.error(
-            f"it mimics joint {leader!r}, which does not exist.{_suggest(leader, by_name)}",
-            line=j.mimic.line,
-            element=f"<mimic> of joint {j.name!r}",
-            attribute="joint",
-            value=leader,
-            fix=fix,
-        )
-
+    mimics = {}
     for j in joints:
         if j.mimic is None:
             continue
-        if j.type == "fixed":
-            # Ignored, as urdfdom and Pinocchio do (Talos' grippers have such joints), but a
-            # leader that does not exist is still an error.
-            if j.mimic.joint not in by_name:
-                raise missing(
-                    j,
-                    "name an existing joint, or delete the <mimic> (a fixed joint does not move, "
-                    "so its <mimic> has no effect).",
-                )
-            continue
-        path: list[URDFJoint] = []
-        on_path: dict[str, int] = {}
-        cur = j
-        while cur.mimic is not None and cur.name not in resolved:
-            on_path[cur.name] = len(path)
-            path.append(cur)
-            leader = cur.mimic.joint
-            where = f"<mimic> of joint {cur.name!r}"
-            if leader not in by_name:
-                raise missing(cur, "name an existing revolute, continuous or prismatic joint.")
-            target = by_name[leader]
-            if target.type not in MOVING_TYPES:
-                raise ctx.error(
-                    f"it mimics joint {leader!r}, which is {target.type}.",
-                    line=cur.mimic.line,
-                    element=where,
-                    attribute="joint",
-                    value=leader,
-                    fix="a mimic joint must follow a revolute, continuous or prismatic joint.",
-                )
-            if leader in on_path:
-                cycle = [p.name for p in path[on_path[leader] :]] + [leader]
-                raise ctx.error(
-                    f"mimic joints form a cycle ({' -> '.join(cycle)}): none of them is "
-                    "independent.",
-                    line=cur.mimic.line,
-                    element=where,
-                    attribute="joint",
-                    value=leader,
-                    fix="remove the <mimic> of one joint of the cycle, so that it drives the "
-                    "others.",
-                )
-            cur = target
-        # value_node = m * value_next + o and value_next = M * q + O compose to
-        # value_node = (m M) q + (m O + o).
-        leader, M, O = resolved.get(cur.name, (cur.name, 1.0, 0.0))
-        for node in reversed(path):
-            m, o = node.mimic.multiplier, node.mimic.offset
-            M, O = m * M, m * O + o
-            resolved[node.name] = (leader, M, O)
-    return resolved
+        if j.type in MOVING_TYPES:
+            mimics[j.name] = (j.mimic.joint, j.mimic.multiplier, j.mimic.offset)
+        elif j.mimic.joint not in by_name:
+            raise _mimic_error(ctx, j, j.mimic.joint, "does not exist", by_name, fixed=True)
+    kinds = {j.name: j.type if j.type not in MOVING_TYPES else "revolute" for j in joints}
+    try:
+        return resolve_mimics(mimics, kinds)
+    except MimicError as e:
+        j = by_name[e.joint]
+        if e.problem == "missing":
+            raise _mimic_error(ctx, j, e.leader, "does not exist", by_name) from None
+        if e.problem == "not_moving":
+            raise _mimic_error(ctx, j, e.leader, f"is {by_name[e.leader].type}", by_name) from None
+        raise ctx.error(
+            f"mimic joints form a cycle ({' -> '.join(e.cycle)}): none of them is independent.",
+            line=j.mimic.line,
+            element=f"<mimic> of joint {j.name!r}",
+            attribute="joint",
+            value=e.leader,
+            fix="remove the <mimic> of one joint of the cycle, so that it drives the others.",
+        ) from None
+
+
+def _mimic_error(ctx, j: URDFJoint, leader: str, what: str, by_name, fixed=False) -> URDFError:
+    if fixed:
+        fix = (
+            "name an existing joint, or delete the <mimic> (a fixed joint does not move, so its "
+            "<mimic> has no effect)."
+        )
+    elif what == "does not exist":
+        fix = "name an existing revolute, continuous or prismatic joint."
+    else:
+        fix = "a mimic joint must follow a revolute, continuous or prismatic joint."
+    hint = _suggest(leader, by_name) if what == "does not exist" else ""
+    return ctx.error(
+        f"it mimics joint {leader!r}, which {what}.{hint}",
+        line=j.mimic.line,
+        element=f"<mimic> of joint {j.name!r}",
+        attribute="joint",
+        value=leader,
+        fix=fix,
+    )
 
 
 def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
@@ -991,85 +965,49 @@ def load_urdf(
             fix="select a part of the robot with a revolute, continuous or prismatic joint.",
         )
     selected = {j.name for j in joints}
-    by_name = model.joint_map
-    leaders = _resolve_mimics(ctx, model.joints)
-    specs = []
-    orphans: dict[str, tuple[str, float, float]] = {}  # follower -> (outside leader, M, O)
-    for j in joints:
-        spec: dict[str, Any] = {
-            "name": j.name,
-            "type": "fixed"
-            if j.type == "fixed"
-            else ("prismatic" if j.type == "prismatic" else "revolute"),
-            "parent": j.parent,
-            "child": j.child,
-            "xyz": j.xyz,
-            "rpy": j.rpy,
-            "axis": j.axis,
-        }
-        if j.type in MOVING_TYPES:
-            spec["lower"], spec["upper"] = j.lower, j.upper
-        if j.mimic is not None and j.type in MOVING_TYPES:
-            leader, M, O = leaders[j.name]
-            if leader in selected:
-                spec["mimic"] = {"joint": leader, "multiplier": M, "offset": O}
-            else:
-                orphans[j.name] = (leader, M, O)
-        specs.append(spec)
+    specs = [_joint_spec(j) for j in joints]
+    # Joints outside the selection that drive selected mimic joints, with their own mimics.
+    leaders = []
+    for j in model.depth_first():
+        if j.name not in selected and j.type in MOVING_TYPES:
+            leaders.append(
+                {
+                    k: v
+                    for k, v in _joint_spec(j).items()
+                    if k in ("name", "type", "lower", "upper", "mimic")
+                }
+            )
+    follows = {s["mimic"]["joint"] for s in specs + leaders if "mimic" in s}
+    leaders = [s for s in leaders if s["name"] in follows]
     try:
-        robot = Robot.from_joints(specs, root=root, name=name or model.name, dtype=dtype)
+        return Robot.from_joints(
+            specs, root=root, name=name or model.name, dtype=dtype, leaders=leaders
+        )
     except URDFError:
         raise
     except ModelError as e:  # pragma: no cover - the parser validates everything first
         raise ctx.error(f"invalid model: {e}") from None
-    if orphans:
-        robot = _drive_orphans(robot, orphans, by_name)
-    return robot
 
 
-def _drive_orphans(
-    robot: Robot, orphans: dict[str, tuple[str, float, float]], by_name: dict[str, URDFJoint]
-) -> Robot:
-    """Re-point mimic joints whose leader is outside the selection at a q entry named after
-    the leader (shared by every follower of that leader), with the leader's limits."""
-    old_names = list(robot.joint_names)
-    new_names: list[str] = []
-    lower, upper = [], []
-    old_lower = np.asarray(robot.lower, dtype=np.float64)
-    old_upper = np.asarray(robot.upper, dtype=np.float64)
-    remap: dict[int, int] = {}
-    for i, n in enumerate(old_names):
-        key = orphans[n][0] if n in orphans else n
-        if key not in new_names:
-            new_names.append(key)
-            if n in orphans:
-                lead = by_name[key]
-                lower.append(lead.lower)
-                upper.append(lead.upper)
-            else:
-                lower.append(float(old_lower[i]))
-                upper.append(float(old_upper[i]))
-        remap[i] = new_names.index(key)
-    mult = np.asarray(robot.multiplier, dtype=np.float64).copy()
-    off = np.asarray(robot.offset, dtype=np.float64).copy()
-    q_index = []
-    for j, qi in enumerate(robot.q_index):
-        if qi < 0:
-            q_index.append(qi)
-            continue
-        q_index.append(remap[qi])
-        # An orphan follower was built as an independent joint: its old q entry is its own.
-        name = old_names[qi]
-        if name in orphans:
-            _, M, O = orphans[name]
-            mult[j], off[j] = M, O
-    dt = robot.dtype
-    return dataclasses.replace(
-        robot,
-        q_index=tuple(q_index),
-        joint_names=tuple(new_names),
-        multiplier=jnp.asarray(mult, dtype=dt),
-        offset=jnp.asarray(off, dtype=dt),
-        lower=jnp.asarray(np.array(lower), dtype=dt),
-        upper=jnp.asarray(np.array(upper), dtype=dt),
-    )
+def _joint_spec(j: URDFJoint) -> dict[str, Any]:
+    """The :func:`jaxkin.build.from_joints` spec of a URDF joint (continuous -> revolute)."""
+    spec: dict[str, Any] = {
+        "name": j.name,
+        "type": "fixed"
+        if j.type == "fixed"
+        else ("prismatic" if j.type == "prismatic" else "revolute"),
+        "parent": j.parent,
+        "child": j.child,
+        "xyz": j.xyz,
+        "rpy": j.rpy,
+        "axis": j.axis,
+    }
+    if j.type in MOVING_TYPES:
+        spec["lower"], spec["upper"] = j.lower, j.upper
+        if j.mimic is not None:
+            spec["mimic"] = {
+                "joint": j.mimic.joint,
+                "multiplier": j.mimic.multiplier,
+                "offset": j.mimic.offset,
+            }
+    return spec

@@ -29,10 +29,10 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ._jit import is_concrete
+from ._checks import is_traced
 from .errors import ModelError
-from .kinematics import joint_placements
 from .model import Robot
+from .placements import joint_placements
 
 __all__ = ["to_urdf"]
 
@@ -108,7 +108,7 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
     """
     if not isinstance(robot, Robot):
         raise ModelError(f"to_urdf expects a jaxkin Robot, got {type(robot).__name__}.")
-    if not is_concrete(robot):
+    if is_traced(robot):
         raise ModelError(
             "to_urdf needs concrete parameters; call it outside jit/vmap/grad (a URDF is text)."
         )

@@ -9,12 +9,11 @@ from __future__ import annotations
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_point, check_q, check_reference, check_twist, result_dtype
 from .errors import JaxkinError, ShapeError
-from .jacobians import _geometric, check_reference
-from .kinematics import check_q
+from .jacobians import jacobian_pass
 from .model import Robot
 
 __all__ = [
@@ -41,10 +40,12 @@ def twist(
     ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``. Computed column by
     column from the same forward pass as :func:`~jaxkin.geometric_jacobian`, without forming J.
     """
-    qd = check_q(robot, qd, what="qd", fn="jk.twist")
+    hint = "jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(qs, qds)"
+    q = check_q(robot, q, fn="jk.twist", batch_hint=hint)
+    qd = check_q(robot, qd, what="qd", fn="jk.twist", batch_hint=hint)
     check_reference(reference)
-    q = check_q(robot, q, fn="jk.twist")
-    g = _geometric(robot, q, robot.frame_index(frame), point, reference)
+    pt = check_point(point, result_dtype(robot, q), "jk.twist")
+    g = jacobian_pass(robot, q, robot.frame_index(frame), pt, reference)
     return g.times(qd.astype(g.dtype))
 
 
@@ -54,13 +55,6 @@ def point_velocity(
     """Velocity (3,) in world axes of a point fixed to ``frame``, given as an offset (3,) from the
     frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``."""
     return twist(robot, q, qd, frame=frame, point=point)[:3]
-
-
-def _check_twist(V) -> jax.Array:
-    V = jnp.asarray(V)
-    if V.shape != (6,):
-        raise ShapeError(f"a twist must have shape (6,) ([v; omega]), got {V.shape}.")
-    return V
 
 
 def classify_twist(V: Any, tol: float = 1e-9) -> str:
@@ -75,7 +69,7 @@ def classify_twist(V: Any, tol: float = 1e-9) -> str:
     ``tol`` is absolute on |omega| and |v| and relative on the pitch ``|v . omega| / |omega|^2``.
     Host-side: returns a Python string, so call it outside ``jit``.
     """
-    V = np.asarray(_check_twist(V), dtype=float)
+    V = np.asarray(check_twist(V, "jk.classify_twist"), dtype=float)
     v, w = V[:3], V[3:]
     nw, nv = np.linalg.norm(w), np.linalg.norm(v)
     if nw <= tol:

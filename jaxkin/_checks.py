@@ -1,0 +1,223 @@
+"""Private: every input check and the one notion of "traced", written once.
+
+Public functions check their arguments here at entry, once; kernels take checked arrays and do
+not check again. Checks run in Python before tracing and raise :class:`~jaxkin.ShapeError` or
+:class:`~jaxkin.JaxkinError` naming what was expected, what was given and the fix.
+
+Value checks (non-finite input, singular configurations) follow one policy, :func:`error_if`:
+called eagerly they raise; under a trace (``jit``/``vmap``/``grad``), where values cannot raise,
+the result is replaced by NaN.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import JaxkinError, ShapeError
+from .model import Robot
+
+REFERENCES = ("world_aligned", "local", "world")
+
+
+# ----------------------------------------------------------------------------- traces
+def is_traced(*trees: Any) -> bool:
+    """True when some leaf of ``trees`` is a JAX tracer (the call is inside a transformation)."""
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def inside_trace() -> bool:
+    """True while JAX is tracing (``jit``/``vmap``/``grad``), even when no argument is traced."""
+    try:
+        from jax._src import core
+
+        return not core.trace_state_clean()
+    except Exception:  # pragma: no cover - private API moved: assume nested
+        return True
+
+
+def error_if(bad: Any, error: Callable[[], Exception], value: Any, *trees: Any) -> Any:
+    """The non-finite/singular policy: raise ``error()`` eagerly when ``bad`` holds, otherwise
+    return ``value``; when ``trees`` (or ``bad``) are traced, return ``value`` with NaN wherever
+    ``bad`` holds (``bad`` broadcasts against each leaf of ``value``)."""
+    if not is_traced(bad, *trees):
+        if bool(np.any(np.asarray(bad))):
+            raise error()
+        return value
+    return jax.tree_util.tree_map(lambda v: jnp.where(bad, jnp.full_like(v, jnp.nan), v), value)
+
+
+# ----------------------------------------------------------------------------- dtypes and math
+def result_dtype(robot: Robot, *arrays: Any) -> np.dtype:
+    """The float dtype of a computation on ``robot`` and ``arrays``: float32 only if all are."""
+    return np.dtype(jnp.result_type(robot.base.dtype, *(a.dtype for a in arrays)))
+
+
+def safe_norm(x: jax.Array, axis: Any = None) -> jax.Array:
+    """Euclidean norm with gradient 0 (never NaN) at ``x = 0`` (double-``where`` safe value)."""
+    sq = jnp.sum(x * x, axis=axis)
+    pos = sq > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
+
+
+# ----------------------------------------------------------------------------- arrays
+def _as_array(x: Any, what: str, fn: str, expected: str) -> Any:
+    """``x`` as something with ``shape`` and ``dtype`` (lists become numpy), or a ShapeError."""
+    if hasattr(x, "shape") and hasattr(x, "dtype"):
+        return x
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        if isinstance(x, (list, tuple)):
+            expected = "a sequence of numbers"
+        raise ShapeError(f"{fn}: {what} must be {expected}, got {x!r:.80}.") from None
+
+
+def _numeric(x: Any, what: str, fn: str) -> None:
+    kind = np.dtype(x.dtype).kind
+    if kind == "c":
+        raise ShapeError(f"{fn}: {what} must be real, got complex dtype {x.dtype}.")
+    if kind not in "fiub":
+        raise ShapeError(f"{fn}: {what} must be an array of numbers, got dtype {x.dtype}.")
+
+
+def check_robot(robot: Any, fn: str) -> Robot:
+    if not isinstance(robot, Robot):
+        raise ShapeError(
+            f"{fn} expects a jaxkin Robot as first argument, got {type(robot).__name__}."
+        )
+    return robot
+
+
+def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", batch_hint=None):
+    """A joint vector of shape (dof,) as a float JAX array (integers take the robot's dtype).
+
+    ``batch_hint`` is the code to suggest for a batch (default: ``jax.vmap(lambda q: fn(robot,
+    q))(qs)``); it must run when pasted.
+    """
+    check_robot(robot, fn)
+    q = _as_array(q, what, fn, "an array of numbers")
+    _numeric(q, what, fn)
+    shape = tuple(q.shape)
+    if shape != (robot.dof,):
+        hint = ""
+        if len(shape) >= 2 and shape[-1] == robot.dof:
+            code = batch_hint or f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
+            hint = f" For a batch of configurations use jax.vmap, e.g. {code}."
+        elif len(shape) == 1:
+            hint = f" Give one value per joint {list(robot.joint_names)}."
+        raise ShapeError(
+            f"{fn}: {what} must have shape ({robot.dof},) for robot {robot.name!r} "
+            f"({robot.dof} joints), got shape {shape}.{hint}"
+        )
+    q = jnp.asarray(q)
+    if not jnp.issubdtype(q.dtype, jnp.floating):
+        q = q.astype(robot.dtype)
+    return q
+
+
+def check_point(point: Any, dtype: Any, fn: str = "this function") -> jax.Array | None:
+    """An offset (3,) in a frame's own axes, or None."""
+    if point is None:
+        return None
+    point = _as_array(point, "point", fn, "3 numbers (an offset in the frame's own axes)")
+    _numeric(point, "point", fn)
+    if tuple(point.shape) != (3,):
+        raise ShapeError(
+            f"{fn}: point must have shape (3,) (an offset in the frame's own axes), got "
+            f"{tuple(point.shape)}."
+        )
+    return jnp.asarray(point, dtype=dtype)
+
+
+def check_reference(reference: Any) -> str:
+    if reference not in REFERENCES:
+        raise JaxkinError(
+            f"reference must be one of {REFERENCES}, got {reference!r}. 'world_aligned' is the "
+            "textbook's geometric Jacobian (frame origin, world axes)."
+        )
+    return reference
+
+
+def check_J(J: Any, fn: str) -> jax.Array:
+    """A Jacobian of shape (m, dof), m and dof >= 1, as a float JAX array."""
+    J = _as_array(J, "J", fn, "an array of numbers")
+    _numeric(J, "J", fn)
+    shape = tuple(J.shape)
+    if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
+        hint = ""
+        if len(shape) == 3:
+            hint = f" For a batch of Jacobians use jax.vmap, e.g. jax.vmap({fn})(Js)."
+        raise ShapeError(
+            f"{fn}: J must have shape (m, dof) (e.g. (6, dof) from jk.geometric_jacobian), got "
+            f"shape {shape}.{hint}"
+        )
+    J = jnp.asarray(J)
+    if not jnp.issubdtype(J.dtype, jnp.floating):
+        J = J.astype(jnp.result_type(float))
+    return J
+
+
+def check_J_and_vector(J: Any, v: Any, fn: str, what: str = "v") -> tuple[jax.Array, jax.Array]:
+    """A Jacobian (m, dof) and a vector (m,) (e.g. a twist), cast to one float dtype."""
+    J = check_J(J, fn)
+    m = J.shape[0]
+    v = _as_array(v, what, fn, f"{m} numbers")
+    _numeric(v, what, fn)
+    if tuple(v.shape) != (m,):
+        raise ShapeError(
+            f"{fn}: {what} must have shape ({m},) to match J's {m} rows (a twist [v; omega] "
+            f"for a geometric Jacobian), got {tuple(v.shape)}. Batch with jax.vmap."
+        )
+    v = jnp.asarray(v)
+    dtype = jnp.result_type(J.dtype, v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else J.dtype)
+    return J.astype(dtype), v.astype(dtype)
+
+
+def check_twist(V: Any, fn: str = "this function") -> jax.Array:
+    V = _as_array(V, "a twist", fn, "6 numbers [v; omega]")
+    _numeric(V, "a twist", fn)
+    if tuple(V.shape) != (6,):
+        raise ShapeError(f"{fn}: a twist must have shape (6,) ([v; omega]), got {V.shape}.")
+    return jnp.asarray(V)
+
+
+def rigid_transform_errors(Ts: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Indices of the (N, 4, 4) float64 transforms that are not rigid: rotation block not
+    orthonormal with det +1 (to ``tol``), or last row not [0, 0, 0, 1]."""
+    R = Ts[:, :3, :3]
+    bad_R = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2)) > tol
+    bad_row = np.abs(Ts[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > 1e-12
+    return np.flatnonzero(bad_R | bad_row | (np.linalg.det(R) < 0))
+
+
+def check_poses(T: Any, fn: str, what: str, dtype: Any, batch: str = "optional"):
+    """Pose(s) ``T_world_frame``: (4, 4), or (N, 4, 4) when ``batch`` is "optional" or
+    "required". Concrete poses must be finite and rigid. Returns ``(T as dtype, batched)``."""
+    T = _as_array(T, what, fn, "a (4, 4) transform")
+    _numeric(T, what, fn)
+    shape = tuple(T.shape)
+    batched = len(shape) == 3 and shape[1:] == (4, 4)
+    if (shape != (4, 4) or batch == "required") and not (batched and batch != "never"):
+        allowed = {
+            "optional": "(4, 4) (one pose, T_world_frame) or (N, 4, 4) (a batch)",
+            "required": "(N, 4, 4) (one pose per measurement)",
+            "never": "(4, 4) (T_world_frame)",
+        }[batch]
+        raise ShapeError(f"{fn}: {what} must have shape {allowed}, got {shape}.")
+    if not is_traced(T):
+        Tn = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
+        if not np.all(np.isfinite(Tn)):
+            raise JaxkinError(f"{fn}: {what} contains NaN or inf.")
+        bad = rigid_transform_errors(Tn)
+        if bad.size:
+            raise JaxkinError(
+                f"{fn}: {what}{f'[{int(bad[0])}]' if batched else ''} is not a rigid transform "
+                "(its rotation block must be orthonormal with det +1 to 1e-6 and its last row "
+                "[0, 0, 0, 1]). Build it with jk.fk or jk.spatial.make_transform."
+            )
+    return jnp.asarray(T, dtype=dtype), batched

@@ -1,0 +1,511 @@
+"""Building robots: every description (DH tables, joint lists, URDF, ...) becomes a
+:class:`~jaxkin.Robot` through one validated path.
+
+Parsers emit joint specs (mappings, see :func:`from_joints`) and call :func:`from_joints`; DH
+tables go through :func:`from_dh`. Validation happens here, on the host, once, before any
+tracing; mimic joints are resolved here, once (:func:`resolve_mimics`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import JaxkinPrecisionWarning, ModelError
+from .model import JOINT_KINDS, Robot
+
+__all__ = ["MimicError", "from_dh", "from_joints", "resolve_dtype", "resolve_mimics"]
+
+_DH_CONVENTIONS = {"standard": "dh_standard", "modified": "dh_modified"}
+
+
+def resolve_dtype(dtype: Any = None) -> np.dtype:
+    """The float dtype to build with: ``dtype`` or JAX's default float.
+
+    Asking for float64 while ``jax_enable_x64`` is off warns (:class:`JaxkinPrecisionWarning`) and
+    returns float32; jaxkin never changes the global JAX configuration.
+    """
+    default = np.dtype(jnp.result_type(float))
+    if dtype is None:
+        return default
+    dt = np.dtype(dtype)
+    if not np.issubdtype(dt, np.floating) or dt.itemsize not in (4, 8):
+        raise ModelError(f"dtype must be float32 or float64, got {dt}.")
+    if dt == np.float64 and not jax.config.read("jax_enable_x64"):
+        warnings.warn(
+            "float64 was requested but jax_enable_x64 is off, so JAX computes in float32. "
+            "Enable it at program start with jax.config.update('jax_enable_x64', True) "
+            "(jaxkin never changes the global JAX configuration).",
+            JaxkinPrecisionWarning,
+            stacklevel=3,
+        )
+        return np.dtype(np.float32)
+    return dt
+
+
+def from_dh(
+    rows: Sequence[Mapping[str, Any]],
+    convention: str = "standard",
+    base: Any = None,
+    tool: Any = None,
+    name: str | None = None,
+    dtype: Any = None,
+) -> Robot:
+    """A serial robot from a Denavit-Hartenberg table.
+
+    Args:
+      rows: one mapping per joint with keys ``a``, ``alpha``, ``d``, ``theta`` (metres,
+        radians) and ``joint`` (``"revolute"`` or ``"prismatic"``); optional ``offset`` (added
+        to the joint variable: to theta for a revolute joint, to d for a prismatic one),
+        ``lower``, ``upper`` (joint limits; default unbounded), ``name``.
+      convention: ``"standard"`` (Spong: ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``) or
+        ``"modified"`` (Craig: ``A_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)``, the
+        row's a and alpha being those of the previous link).
+      base: optional (4, 4) ``T_world_base``; identity if None.
+      tool: optional (4, 4) ``T_flange_tool``; adds a frame ``"tool"`` after the last link.
+      name: the robot's name.
+      dtype: float32 or float64 (default: JAX's default float).
+
+    Frames are ``"base"``, ``"link1"`` ... ``"linkN"`` (frame i after joint i) and ``"tool"``.
+    """
+    if convention not in _DH_CONVENTIONS:
+        raise ModelError(
+            f"DH convention must be 'standard' or 'modified', got {convention!r}. "
+            "Pass convention='standard' (Spong) or convention='modified' (Craig)."
+        )
+    if isinstance(rows, Mapping) or not isinstance(rows, Sequence) or len(rows) == 0:
+        raise ModelError(
+            "rows must be a non-empty sequence of mappings (one per joint) with keys "
+            f"a, alpha, d, theta, joint; got {type(rows).__name__}."
+        )
+    dt = resolve_dtype(dtype)
+    n = len(rows)
+    cols: dict[str, list[float]] = {k: [] for k in ("a", "alpha", "d", "theta")}
+    kinds, offsets, lowers, uppers, names = [], [], [], [], []
+    allowed = {"a", "alpha", "d", "theta", "joint", "offset", "lower", "upper", "name"}
+    for i, row in enumerate(rows):
+        where = f"DH row {i}"
+        if not isinstance(row, Mapping):
+            raise ModelError(f"{where} must be a mapping, got {type(row).__name__}.")
+        unknown = set(row) - allowed
+        if unknown:
+            raise ModelError(
+                f"{where} has unknown key(s) {sorted(unknown)}; allowed keys are {sorted(allowed)}."
+            )
+        for key in ("a", "alpha", "d", "theta", "joint"):
+            if key not in row:
+                raise ModelError(
+                    f"{where} is missing key {key!r}; every row needs a, alpha, d, theta "
+                    "and joint ('revolute' or 'prismatic')."
+                )
+        kind = row["joint"]
+        if kind not in ("revolute", "prismatic"):
+            raise ModelError(
+                f"{where} has unknown joint kind {kind!r}; use 'revolute' or 'prismatic'."
+            )
+        for key in ("a", "alpha", "d", "theta"):
+            cols[key].append(_finite_float(row[key], f"{where}, key {key!r}"))
+        offsets.append(_finite_float(row.get("offset", 0.0), f"{where}, key 'offset'"))
+        lo = _limit(row.get("lower", -math.inf), f"{where}, key 'lower'")
+        hi = _limit(row.get("upper", math.inf), f"{where}, key 'upper'")
+        if lo > hi:
+            raise ModelError(f"{where}: lower limit {lo} is above upper limit {hi}.")
+        kinds.append(kind)
+        lowers.append(lo)
+        uppers.append(hi)
+        names.append(str(row.get("name", f"joint{i + 1}")))
+    _check_unique(names, "joint name")
+    params = {k: jnp.asarray(np.array(v), dtype=dt) for k, v in cols.items()}
+    frame_names = ["base"] + [f"link{i + 1}" for i in range(n)]
+    return _build(
+        name=name or "dh_robot",
+        parameterisation=_DH_CONVENTIONS[convention],
+        params=params,
+        axis=np.tile([0.0, 0.0, 1.0], (n, 1)),
+        kinds=kinds,
+        parents=list(range(n)),
+        q_index=list(range(n)),
+        offset=offsets,
+        multiplier=[1.0] * n,
+        lower=lowers,
+        upper=uppers,
+        joint_names=names,
+        frame_names=frame_names,
+        base=base,
+        tool=tool,
+        dtype=dt,
+    )
+
+
+def from_joints(
+    joints: Sequence[Mapping[str, Any]],
+    root: str = "base",
+    base: Any = None,
+    tool: Any = None,
+    name: str | None = None,
+    dtype: Any = None,
+    leaders: Sequence[Mapping[str, Any]] = (),
+) -> Robot:
+    """A robot from URDF-style joint placements (chain or tree).
+
+    Args:
+      joints: one mapping per joint, parents before children, with keys ``name``, ``type``
+        (``"revolute"``, ``"prismatic"`` or ``"fixed"``), ``child`` (the name of the frame the
+        joint moves), optional ``parent`` (a frame name; default: the previous joint's child),
+        ``xyz`` and ``rpy`` (the joint origin in the parent frame, URDF fixed-axis roll-pitch-
+        yaw ``R = Rz(y) Ry(p) Rx(r)``; default zeros), ``axis`` (in the joint frame, normalised;
+        default (1, 0, 0) as in URDF), ``lower``, ``upper``, ``mimic``.
+      root: the name of the base frame.
+      base, tool, name, dtype: as in :meth:`from_dh`.
+
+    ``T_parent_child(q) = Trans(xyz) Rot(rpy) Motion(axis, value)``, as in URDF, where
+    ``value = q[i]`` for an independent joint.
+
+    Mimic joints (URDF ``<mimic>``): ``mimic={"joint": leader, "multiplier": m, "offset": o}``
+    (multiplier default 1, offset default 0) makes a revolute or prismatic joint follow the
+    moving joint named ``leader`` (listed anywhere in ``joints``):
+    ``value = m * value_leader + o``. A mimic joint is not an entry of ``q`` (it is not in
+    ``joint_names`` and its ``lower``/``upper`` are checked but not kept: the leader's limits
+    bound ``q``); its Jacobian column folds into the leader's, scaled by ``m``. A leader may
+    itself mimic another joint: the chain is resolved to the independent joint at its end
+    (multipliers multiply, offsets compose); a chain that loops back is an error.
+
+    ``leaders``: joints that are not part of the robot's structure but drive some of its mimic
+    joints (a chain cut out of a larger file whose gripper fingers follow a joint outside it);
+    mappings with ``name``, ``type``, ``lower``, ``upper`` and optional ``mimic``. A leader at the
+    end of a mimic chain becomes an entry of ``q`` named after it, placed where its first
+    follower is, with its limits.
+    """
+    if isinstance(joints, Mapping) or not isinstance(joints, Sequence) or len(joints) == 0:
+        raise ModelError("joints must be a non-empty sequence of mappings, one per joint.")
+    dt = resolve_dtype(dtype)
+    frame_names = [str(root)]
+    frame_of = {str(root): 0}  # name -> frame index (O(1) lookups for long chains)
+    xyz, rpy, axes, kinds, parents, q_index = [], [], [], [], [], []
+    lowers, uppers, joint_names, all_names = [], [], [], []
+    mimics: dict[str, tuple[str, float, float]] = {}  # joint name -> (leader, mult, offset)
+    limits: dict[str, tuple[float, float] | None] = {}
+    allowed = {
+        "name",
+        "type",
+        "child",
+        "parent",
+        "xyz",
+        "rpy",
+        "axis",
+        "lower",
+        "upper",
+        "mimic",
+    }
+    for j, spec in enumerate(joints):
+        where = f"joint {j}"
+        if not isinstance(spec, Mapping):
+            raise ModelError(f"{where} must be a mapping, got {type(spec).__name__}.")
+        unknown = set(spec) - allowed
+        if unknown:
+            raise ModelError(
+                f"{where} has unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}."
+            )
+        for key in ("name", "type", "child"):
+            if key not in spec:
+                raise ModelError(f"{where} is missing key {key!r}.")
+        jname = str(spec["name"])
+        where = f"joint {jname!r}"
+        kind = spec["type"]
+        if kind not in JOINT_KINDS:
+            raise ModelError(
+                f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic' or 'fixed'."
+            )
+        parent_name = spec.get("parent", frame_names[-1])
+        if not isinstance(parent_name, str) or parent_name not in frame_of:
+            shown = frame_names if len(frame_names) <= 20 else [*frame_names[:20], "..."]
+            raise ModelError(
+                f"{where}: parent frame {parent_name!r} is not defined by an earlier joint "
+                f"(known frames: {shown}). List parents before children."
+            )
+        child = str(spec["child"])
+        if child in frame_of:
+            raise ModelError(f"{where}: frame {child!r} already has a parent.")
+        xyz.append(_vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'"))
+        rpy.append(_vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'"))
+        ax = _vector3(spec.get("axis", (1.0, 0.0, 0.0)), f"{where}, key 'axis'")
+        # Overflow- and underflow-safe norm (math.hypot scales internally).
+        norm = math.hypot(*(float(x) for x in ax))
+        if kind != "fixed" and norm == 0.0:
+            raise ModelError(f"{where} has a zero axis; give a non-zero direction.")
+        if norm == 0.0:
+            ax = np.array([1.0, 0.0, 0.0])
+        elif abs(norm - 1.0) > 4 * np.finfo(np.float64).eps:
+            ax = ax / norm  # a unit axis (to rounding) is kept bit for bit: idempotent
+        axes.append(ax)
+        kinds.append(kind)
+        parents.append(frame_of[parent_name])
+        frame_of[child] = len(frame_names)
+        frame_names.append(child)
+        all_names.append(jname)
+        mimic = spec.get("mimic")
+        if mimic is not None:
+            if kind == "fixed":
+                raise ModelError(
+                    f"{where} is fixed but has a mimic; only revolute and prismatic joints "
+                    "can mimic another joint."
+                )
+            mimics[jname] = _mimic_spec(mimic, where)
+        if kind != "fixed":
+            lo = _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'")
+            hi = _limit(spec.get("upper", math.inf), f"{where}, key 'upper'")
+            if lo > hi:
+                raise ModelError(f"{where}: lower limit {lo} is above upper limit {hi}.")
+        limits[jname] = (lo, hi) if kind != "fixed" else None
+    _check_unique(all_names, "joint name")
+    kind_of = dict(zip(all_names, kinds, strict=True))
+    for spec in leaders:  # outside the structure: kinds, limits and mimics only
+        lname = str(spec["name"])
+        lkind = spec["type"]
+        if lname in kind_of or lkind not in ("revolute", "prismatic"):
+            raise ModelError(f"leader joint {lname!r} must be a new revolute or prismatic joint.")
+        kind_of[lname] = lkind
+        where = f"leader joint {lname!r}"
+        limits[lname] = (
+            _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'"),
+            _limit(spec.get("upper", math.inf), f"{where}, key 'upper'"),
+        )
+        if spec.get("mimic") is not None:
+            mimics[lname] = _mimic_spec(spec["mimic"], where)
+    try:
+        resolved = resolve_mimics(mimics, kind_of)
+    except MimicError as e:
+        raise ModelError(str(e)) from None
+    q_of: dict[str, int] = {}  # independent joint name -> index into q
+    for jname, kind in zip(all_names, kinds, strict=True):
+        driver = resolved[jname][0] if jname in resolved else jname
+        if kind != "fixed" and driver not in q_of and (driver == jname or driver not in all_names):
+            q_of[driver] = len(q_of)
+    n = len(kinds)
+    multiplier, offset, q_index = [1.0] * n, [0.0] * n, [-1] * n
+    for j, (jname, kind) in enumerate(zip(all_names, kinds, strict=True)):
+        if kind == "fixed":
+            continue
+        driver, multiplier[j], offset[j] = resolved.get(jname, (jname, 1.0, 0.0))
+        q_index[j] = q_of[driver]
+    joint_names = list(q_of)
+    lowers = [limits[k][0] for k in joint_names]
+    uppers = [limits[k][1] for k in joint_names]
+    if not joint_names:
+        raise ModelError("the robot has no moving joint (all joints are fixed).")
+    params = {
+        "xyz": jnp.asarray(np.array(xyz), dtype=dt),
+        "rpy": jnp.asarray(np.array(rpy), dtype=dt),
+    }
+    return _build(
+        name=name or "robot",
+        parameterisation="placement",
+        params=params,
+        axis=np.array(axes),
+        kinds=kinds,
+        parents=parents,
+        q_index=q_index,
+        offset=offset,
+        multiplier=multiplier,
+        lower=lowers,
+        upper=uppers,
+        joint_names=joint_names,
+        frame_names=frame_names,
+        base=base,
+        tool=tool,
+        dtype=dt,
+    )
+
+
+def _build(
+    *, base, tool, dtype, frame_names, offset, multiplier, lower, upper, axis, **static
+) -> Robot:
+    has_tool = tool is not None
+    base_T = _transform(base, "base")
+    tool_T = _transform(tool, "tool")
+    frame_names = list(frame_names)
+    if has_tool:
+        frame_names.append("tool")
+    _check_unique(frame_names, "frame name")
+    leaves = dict(
+        axis=jnp.asarray(axis, dtype=dtype),
+        offset=jnp.asarray(np.array(offset, dtype=float), dtype=dtype),
+        multiplier=jnp.asarray(np.array(multiplier, dtype=float), dtype=dtype),
+        lower=jnp.asarray(np.array(lower, dtype=float), dtype=dtype),
+        upper=jnp.asarray(np.array(upper, dtype=float), dtype=dtype),
+        base=jnp.asarray(base_T, dtype=dtype),
+        tool=jnp.asarray(tool_T, dtype=dtype),
+    )
+    return Robot(
+        params=static.pop("params"),
+        **leaves,
+        name=str(static.pop("name")),
+        parameterisation=static.pop("parameterisation"),
+        kinds=tuple(static.pop("kinds")),
+        parents=tuple(int(p) for p in static.pop("parents")),
+        q_index=tuple(int(i) for i in static.pop("q_index")),
+        joint_names=tuple(static.pop("joint_names")),
+        frame_names=tuple(frame_names),
+        has_tool=has_tool,
+    )
+
+
+# ---------------------------------------------------------------------- host-side validation
+def _finite_float(value: Any, where: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where} must be a number, got {value!r}.") from None
+    if not math.isfinite(x):
+        raise ModelError(f"{where} must be finite, got {value!r}.")
+    return x
+
+
+def _mimic_spec(value: Any, where: str) -> tuple[str, float, float]:
+    """Validate a ``mimic`` mapping of :meth:`Robot.from_joints`: (leader, multiplier, offset)."""
+    if not isinstance(value, Mapping):
+        raise ModelError(
+            f"{where}, key 'mimic' must be a mapping {{'joint': name, 'multiplier': m, "
+            f"'offset': o}}, got {value!r}."
+        )
+    unknown = set(value) - {"joint", "multiplier", "offset"}
+    if unknown:
+        raise ModelError(
+            f"{where}, key 'mimic' has unknown key(s) {sorted(unknown)}; allowed: "
+            "['joint', 'multiplier', 'offset']."
+        )
+    leader = value.get("joint")
+    if not isinstance(leader, str) or not leader:
+        raise ModelError(
+            f"{where}, key 'mimic' needs 'joint': the name of the joint it follows, got {leader!r}."
+        )
+    mult = _finite_float(value.get("multiplier", 1.0), f"{where}, mimic 'multiplier'")
+    off = _finite_float(value.get("offset", 0.0), f"{where}, mimic 'offset'")
+    return leader, mult, off
+
+
+class MimicError(ModelError):
+    """A mimic joint that cannot be resolved: ``problem`` is "missing", "not_moving" or "cycle";
+    ``joint`` the follower whose leader is at fault, ``leader`` that leader, ``cycle`` the
+    joint names around a cycle."""
+
+    def __init__(self, message: str, problem: str, joint: str, leader: str, cycle=()):
+        super().__init__(message)
+        self.problem, self.joint, self.leader, self.cycle = problem, joint, leader, tuple(cycle)
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.problem, self.joint, self.leader, self.cycle))
+
+
+def resolve_mimics(
+    mimics: Mapping[str, tuple[str, float, float]], kinds: Mapping[str, str]
+) -> dict[str, tuple[str, float, float]]:
+    """Resolve every mimic joint to the independent joint at the end of its mimic chain.
+
+    ``mimics`` maps a follower to ``(leader, m, o)`` (``value = m * value_leader + o``);
+    ``kinds`` gives every known joint's kind. Returns ``{follower: (driver, M, O)}`` with
+    ``value = M * value_driver + O`` and ``driver`` independent. Following ``j -> k -> ... -> i``
+    composes multipliers and offsets. Iterative and linear (memoised). Raises
+    :class:`MimicError` for a missing or fixed leader or a cycle.
+    """
+    resolved: dict[str, tuple[str, float, float]] = {}
+    for start in mimics:
+        path: list[str] = []
+        on_path: dict[str, int] = {}
+        k = start
+        while k in mimics and k not in resolved:
+            on_path[k] = len(path)
+            path.append(k)
+            leader = mimics[k][0]
+            if leader not in kinds:
+                raise MimicError(
+                    f"joint {k!r} mimics joint {leader!r}, which is not a joint of this robot; "
+                    "name an existing revolute or prismatic joint.",
+                    "missing",
+                    k,
+                    leader,
+                )
+            if kinds[leader] not in ("revolute", "prismatic"):
+                raise MimicError(
+                    f"joint {k!r} mimics joint {leader!r}, which is {kinds[leader]}; a mimic "
+                    "joint must follow a revolute or prismatic joint.",
+                    "not_moving",
+                    k,
+                    leader,
+                )
+            if leader in on_path:
+                cycle = [*path[on_path[leader] :], leader]
+                raise MimicError(
+                    f"mimic joints form a cycle ({' -> '.join(cycle)}): no joint in it is "
+                    "independent. Make one of them an independent joint (remove its mimic).",
+                    "cycle",
+                    k,
+                    leader,
+                    cycle,
+                )
+            k = leader
+        # k is independent or already resolved: value_k = M * q[driver] + O.
+        driver, M, O = resolved.get(k, (k, 1.0, 0.0))
+        for i in reversed(path):
+            _, m, o = mimics[i]
+            M, O = m * M, m * O + o  # value_i = m * value_next + o
+            resolved[i] = (driver, M, O)
+    return resolved
+
+
+def _limit(value: Any, where: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where} must be a number, got {value!r}.") from None
+    if math.isnan(x):
+        raise ModelError(f"{where} is NaN; give a number (or omit it for no limit).")
+    return x
+
+
+def _vector3(value: Any, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where} must be 3 numbers, got {value!r}.") from None
+    if arr.shape != (3,):
+        raise ModelError(f"{where} must be 3 numbers, got shape {arr.shape}.")
+    if not np.all(np.isfinite(arr)):
+        raise ModelError(f"{where} must be finite, got {arr.tolist()}.")
+    return arr
+
+
+def _transform(value: Any, what: str) -> np.ndarray:
+    if value is None:
+        return np.eye(4)
+    try:
+        T = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what} must be a 4x4 homogeneous transform, got {value!r}.") from None
+    if T.shape != (4, 4):
+        raise ModelError(f"{what} must be a 4x4 homogeneous transform, got shape {T.shape}.")
+    if not np.all(np.isfinite(T)):
+        raise ModelError(f"{what} transform must be finite.")
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+        raise ModelError(
+            f"{what} must be a homogeneous transform: orthonormal rotation block and last row "
+            "[0, 0, 0, 1]."
+        )
+    if np.linalg.det(R) < 0:
+        raise ModelError(f"{what} rotation block has determinant -1 (a reflection).")
+    return T
+
+
+def _check_unique(names: Sequence[str], what: str) -> None:
+    seen = set()
+    for n in names:
+        if n in seen:
+            raise ModelError(f"duplicate {what} {n!r}; names must be unique.")
+        seen.add(n)
