@@ -77,9 +77,14 @@ def test_yoshikawa_is_the_product_of_singular_values(ur5_wrist):
         s_r = np.linalg.svd(J[:, sl], compute_uv=False)
         np.testing.assert_allclose(out[f"yoshikawa/{r}"], np.prod(s_r, axis=1), rtol=1e-12)
         # away from their own singularities the sub-blocks also equal sqrt(det(J J^T))
-        det = np.linalg.det(J[:, sl] @ np.swapaxes(J[:, sl], 1, 2))
-        # (sqrt(det) is the less accurate side: about eps * cond(J J^T) relative)
-        np.testing.assert_allclose(out[f"yoshikawa/{r}"], np.sqrt(np.abs(det)), rtol=0, atol=1e-12)
+        # (sqrt(det) is the less accurate side: about eps * cond(J J^T) relative, so only
+        # configurations with a block condition number below 100 are compared)
+        away = s_r[:, -1] > 1e-2 * s_r[:, 0]
+        assert away.mean() > 0.5
+        det = np.linalg.det(J[away][:, sl] @ np.swapaxes(J[away][:, sl], 1, 2))
+        np.testing.assert_allclose(
+            out[f"yoshikawa/{r}"][away], np.sqrt(np.abs(det)), rtol=0, atol=1e-12
+        )
         np.testing.assert_allclose(
             out[f"inverse_condition/{r}"], s_r[:, -1] / s_r[:, 0], rtol=1e-12, atol=1e-15
         )
