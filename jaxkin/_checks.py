@@ -7,6 +7,10 @@ not check again. Checks run in Python before tracing and raise :class:`~jaxkin.S
 Value checks (non-finite input, singular configurations) follow one policy, :func:`error_if`:
 called eagerly they raise; under a trace (``jit``/``vmap``/``grad``), where values cannot raise,
 the result is replaced by NaN.
+
+Non-finite input follows the policy documented once in :mod:`jaxkin.analysis` ("Non-finite
+input"): :func:`finite_guard` implements it (eagerly raise naming the argument; under a trace
+poison the result: NaN values, True flags, -1 counts).
 """
 
 from __future__ import annotations
@@ -49,6 +53,58 @@ def error_if(bad: Any, error: Callable[[], Exception], value: Any, *trees: Any) 
             raise error()
         return value
     return jax.tree_util.tree_map(lambda v: jnp.where(bad, jnp.full_like(v, jnp.nan), v), value)
+
+
+class FiniteGuard:
+    """The non-finite policy of one call (module doc), from :func:`finite_guard`.
+
+    ``bad``: False (eager: the inputs were checked), or a traced bool scalar, True where some
+    input holds NaN or inf. Calling the guard on a result poisons it where ``bad`` holds: float
+    leaves NaN, bool leaves True, integer leaves -1; eagerly it returns the result unchanged.
+    Finite results are unchanged bit for bit (a multiplication by 1.0, whose derivative is 1.0).
+    """
+
+    def __init__(self, bad: Any):
+        self.bad = bad
+
+    def __call__(self, value: Any) -> Any:
+        bad = self.bad
+        if bad is False:
+            return value
+
+        def poison(v):
+            v = jnp.asarray(v)
+            if jnp.issubdtype(v.dtype, jnp.inexact):
+                return v * jnp.where(bad, jnp.nan, 1.0).astype(v.dtype)
+            if v.dtype == jnp.bool_:
+                return v | bad
+            return jnp.where(bad, jnp.asarray(-1, v.dtype), v)
+
+        return jax.tree_util.tree_map(poison, value)
+
+
+def finite_guard(fn: str, **inputs: Any) -> FiniteGuard:
+    """The entry check of the non-finite policy (module doc) for public function ``fn``.
+
+    ``inputs`` are the argument names and values whose entries must be finite (None skipped).
+    Eagerly (no tracer among them) raises :class:`~jaxkin.JaxkinError` naming the first one that
+    holds NaN or inf; otherwise returns the :class:`FiniteGuard` that poisons the result.
+    """
+    inputs = {k: v for k, v in inputs.items() if v is not None}
+    if not is_traced(*inputs.values()):
+        for name, x in inputs.items():
+            a = np.asarray(x)
+            if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
+                raise JaxkinError(
+                    f"{fn}: {name} contains NaN or inf, so no meaningful result exists. Find "
+                    "where it came from (e.g. jax.config.update('jax_debug_nans', True)). Under "
+                    "jit/vmap the result is NaN instead (flags True, counts -1; see 'Non-finite "
+                    "input' in jaxkin.analysis)."
+                )
+        return FiniteGuard(False)
+    arrays = [jnp.asarray(x) for x in inputs.values()]
+    ok = [jnp.all(jnp.isfinite(x)) for x in arrays if jnp.issubdtype(x.dtype, jnp.inexact)]
+    return FiniteGuard(~jnp.all(jnp.stack(ok)) if ok else False)
 
 
 # ----------------------------------------------------------------------------- dtypes and math
@@ -120,17 +176,22 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", ba
     return q
 
 
+def check_vector(x: Any, n: int, what: str, fn: str, meaning: str, hint: str = "") -> Any:
+    """A real vector of shape (n,) (still host data or a JAX array, as given)."""
+    x = _as_array(x, what, fn, f"{n} numbers ({meaning})")
+    _numeric(x, what, fn)
+    if tuple(x.shape) != (n,):
+        raise ShapeError(
+            f"{fn}: {what} must have shape ({n},) ({meaning}), got {tuple(x.shape)}.{hint}"
+        )
+    return x
+
+
 def check_point(point: Any, dtype: Any, fn: str = "this function") -> jax.Array | None:
     """An offset (3,) in a frame's own axes, or None."""
     if point is None:
         return None
-    point = _as_array(point, "point", fn, "3 numbers (an offset in the frame's own axes)")
-    _numeric(point, "point", fn)
-    if tuple(point.shape) != (3,):
-        raise ShapeError(
-            f"{fn}: point must have shape (3,) (an offset in the frame's own axes), got "
-            f"{tuple(point.shape)}."
-        )
+    point = check_vector(point, 3, "point", fn, "an offset in the frame's own axes")
     return jnp.asarray(point, dtype=dtype)
 
 
@@ -166,24 +227,14 @@ def check_J_and_vector(J: Any, v: Any, fn: str, what: str = "v") -> tuple[jax.Ar
     """A Jacobian (m, dof) and a vector (m,) (e.g. a twist), cast to one float dtype."""
     J = check_J(J, fn)
     m = J.shape[0]
-    v = _as_array(v, what, fn, f"{m} numbers")
-    _numeric(v, what, fn)
-    if tuple(v.shape) != (m,):
-        raise ShapeError(
-            f"{fn}: {what} must have shape ({m},) to match J's {m} rows (a twist [v; omega] "
-            f"for a geometric Jacobian), got {tuple(v.shape)}. Batch with jax.vmap."
-        )
-    v = jnp.asarray(v)
+    meaning = f"to match J's {m} rows: a twist [v; omega] for a geometric Jacobian"
+    v = jnp.asarray(check_vector(v, m, what, fn, meaning, " Batch with jax.vmap."))
     dtype = jnp.result_type(J.dtype, v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else J.dtype)
     return J.astype(dtype), v.astype(dtype)
 
 
 def check_twist(V: Any, fn: str = "this function") -> jax.Array:
-    V = _as_array(V, "a twist", fn, "6 numbers [v; omega]")
-    _numeric(V, "a twist", fn)
-    if tuple(V.shape) != (6,):
-        raise ShapeError(f"{fn}: a twist must have shape (6,) ([v; omega]), got {V.shape}.")
-    return jnp.asarray(V)
+    return jnp.asarray(check_vector(V, 6, "a twist", fn, "[v; omega]"))
 
 
 def rigid_transform_errors(Ts: np.ndarray, tol: float = 1e-6) -> np.ndarray:

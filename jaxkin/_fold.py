@@ -104,10 +104,6 @@ def cross(u: Vec, v: Vec) -> Vec:
     )
 
 
-def column(A: Mat, j: int) -> Vec:
-    return (A[0][j], A[1][j], A[2][j])
-
-
 def transpose(A: Mat) -> Mat:
     return tuple(tuple(A[j][i] for j in range(3)) for i in range(3))
 

@@ -91,19 +91,13 @@ def from_dh(
     allowed = {"a", "alpha", "d", "theta", "joint", "offset", "lower", "upper", "name"}
     for i, row in enumerate(rows):
         where = f"DH row {i}"
-        if not isinstance(row, Mapping):
-            raise ModelError(f"{where} must be a mapping, got {type(row).__name__}.")
-        unknown = set(row) - allowed
-        if unknown:
-            raise ModelError(
-                f"{where} has unknown key(s) {sorted(unknown)}; allowed keys are {sorted(allowed)}."
-            )
-        for key in ("a", "alpha", "d", "theta", "joint"):
-            if key not in row:
-                raise ModelError(
-                    f"{where} is missing key {key!r}; every row needs a, alpha, d, theta "
-                    "and joint ('revolute' or 'prismatic')."
-                )
+        _check_keys(
+            row,
+            where,
+            allowed,
+            ("a", "alpha", "d", "theta", "joint"),
+            "every row needs a, alpha, d, theta and joint ('revolute' or 'prismatic')",
+        )
         kind = row["joint"]
         if kind not in ("revolute", "prismatic"):
             raise ModelError(
@@ -151,6 +145,7 @@ def from_joints(
     name: str | None = None,
     dtype: Any = None,
     leaders: Sequence[Mapping[str, Any]] = (),
+    default_frames: Sequence[str] = (),
 ) -> Robot:
     """A robot from URDF-style joint placements (chain or tree).
 
@@ -181,6 +176,11 @@ def from_joints(
     mappings with ``name``, ``type``, ``lower``, ``upper`` and optional ``mimic``. A leader at the
     end of a mimic chain becomes an entry of ``q`` named after it, placed where its first
     follower is, with its limits.
+
+    ``default_frames``: which frame ``frame=None`` means (:attr:`jaxkin.Robot.tip_frame`):
+    ``()`` (default) the last frame; one frame name, that frame; several names, none (the
+    robot branches: asking for the default raises, listing these candidates).
+    :func:`jaxkin.load_urdf` fills it in.
     """
     if isinstance(joints, Mapping) or not isinstance(joints, Sequence) or len(joints) == 0:
         raise ModelError("joints must be a non-empty sequence of mappings, one per joint.")
@@ -205,16 +205,9 @@ def from_joints(
     }
     for j, spec in enumerate(joints):
         where = f"joint {j}"
-        if not isinstance(spec, Mapping):
-            raise ModelError(f"{where} must be a mapping, got {type(spec).__name__}.")
-        unknown = set(spec) - allowed
-        if unknown:
-            raise ModelError(
-                f"{where} has unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}."
-            )
-        for key in ("name", "type", "child"):
-            if key not in spec:
-                raise ModelError(f"{where} is missing key {key!r}.")
+        _check_keys(
+            spec, where, allowed, ("name", "type", "child"), "every joint needs name, type, child"
+        )
         jname = str(spec["name"])
         where = f"joint {jname!r}"
         kind = spec["type"]
@@ -320,11 +313,23 @@ def from_joints(
         base=base,
         tool=tool,
         dtype=dt,
+        default_frames=default_frames,
     )
 
 
 def _build(
-    *, base, tool, dtype, frame_names, offset, multiplier, lower, upper, axis, **static
+    *,
+    base,
+    tool,
+    dtype,
+    frame_names,
+    offset,
+    multiplier,
+    lower,
+    upper,
+    axis,
+    default_frames=(),
+    **static,
 ) -> Robot:
     has_tool = tool is not None
     base_T = _transform(base, "base")
@@ -333,6 +338,7 @@ def _build(
     if has_tool:
         frame_names.append("tool")
     _check_unique(frame_names, "frame name")
+    default_frames = _default_frames(default_frames, frame_names)
     leaves = dict(
         axis=jnp.asarray(axis, dtype=dtype),
         offset=jnp.asarray(np.array(offset, dtype=float), dtype=dtype),
@@ -353,10 +359,42 @@ def _build(
         joint_names=tuple(static.pop("joint_names")),
         frame_names=tuple(frame_names),
         has_tool=has_tool,
+        default_frames=default_frames,
     )
 
 
+def _default_frames(value: Any, frame_names: Sequence[str]) -> tuple[str, ...]:
+    """Validate ``default_frames``; the last frame as the only one is stored as ``()`` (the same
+    default), so that robots built with and without it compare equal."""
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise ModelError(
+            f"default_frames must be a sequence of frame names, got {value!r}; pass "
+            "('name',) for one default frame."
+        )
+    names = tuple(value)
+    known = set(frame_names)
+    for n in names:
+        if not isinstance(n, str) or n not in known:
+            raise ModelError(f"default_frames: {n!r} is not a frame of the robot.")
+    _check_unique(names, "default frame")
+    return () if names == (frame_names[-1],) else names
+
+
 # ---------------------------------------------------------------------- host-side validation
+def _check_keys(spec: Any, where: str, allowed: set, required: tuple, needs: str) -> None:
+    """``spec`` is a mapping with every ``required`` key and no key outside ``allowed``."""
+    if not isinstance(spec, Mapping):
+        raise ModelError(f"{where} must be a mapping, got {type(spec).__name__}.")
+    unknown = set(spec) - allowed
+    if unknown:
+        raise ModelError(
+            f"{where} has unknown key(s) {sorted(unknown)}; allowed keys are {sorted(allowed)}."
+        )
+    for key in required:
+        if key not in spec:
+            raise ModelError(f"{where} is missing key {key!r}; {needs}.")
+
+
 def _finite_float(value: Any, where: str) -> float:
     try:
         x = float(value)

@@ -45,9 +45,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
+from ._checks import check_q, result_dtype
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
-from .kinematics import check_q, forward_pass
+from .kinematics import forward_pass
 from .model import Robot
+from .sampling import sampling_bounds
 
 try:
     from hypothesis import strategies as st
@@ -223,17 +225,14 @@ def tree_robots(draw, min_joints: int = 1, max_joints: int = 10, dtype: Any = No
 
 
 def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.ndarray]:
-    """Joint vectors (dof,) within the robot's limits (infinite limits: [-pi, pi] or [-1, 1])."""
-    lo = np.asarray(robot.lower, dtype=float)
-    hi = np.asarray(robot.upper, dtype=float)
-    kinds = robot.joint_kinds
+    """Joint vectors (dof,) within :func:`jaxkin.sampling_bounds` (the joint limits; unbounded
+    sides as :mod:`jaxkin.sampling` documents), ``margin`` (a fraction of each range) kept
+    clear of both ends."""
+    lo, hi = sampling_bounds(robot)
     elems = []
-    for i in range(robot.dof):
-        default = math.pi if kinds[i] == "revolute" else 1.0
-        a = lo[i] if np.isfinite(lo[i]) else -default
-        b = hi[i] if np.isfinite(hi[i]) else default
+    for a, b in zip(lo, hi, strict=True):
         a, b = a + margin * (b - a), b - margin * (b - a)
-        elems.append(st.floats(a, b, **_FINITE))
+        elems.append(st.floats(float(a), float(b), **_FINITE))
     return st.tuples(*elems).map(lambda t: np.array(t, dtype=float))
 
 
@@ -299,7 +298,7 @@ def near_singular_configurations(
         raise ValueError(f"rows must be one of {tuple(_ROWS)}, got {rows!r}.")
     robot.frame_index(frame)  # validates frame now, not inside hypothesis
     dtype = jnp.result_type(float)
-    lo, hi = _finite_limits(robot)
+    lo, hi = sampling_bounds(robot)
     rank = _generic_rank(robot, frame, rows, lo, hi, dtype)
     if rank == 0:
         raise ValueError(f"no joint moves frame {frame!r} of robot {robot.name!r}.")
@@ -324,17 +323,6 @@ def near_singular_configurations(
         return None
 
     return configurations(robot).map(newton).filter(lambda q: q is not None)
-
-
-def _finite_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """Joint limits with unbounded sides replaced as in :func:`configurations`."""
-    lo = np.asarray(robot.lower, dtype=float).copy()
-    hi = np.asarray(robot.upper, dtype=float).copy()
-    for i, kind in enumerate(robot.joint_kinds):
-        default = math.pi if kind == "revolute" else 1.0
-        lo[i] = lo[i] if np.isfinite(lo[i]) else -default
-        hi[i] = hi[i] if np.isfinite(hi[i]) else default
-    return lo, hi
 
 
 def robots_and_configurations(
@@ -408,9 +396,9 @@ def assert_jacobian_consistent(
     float32, reach being the largest distance of a frame from the base. Finite differences run
     only in float64 (default: whenever x64 is on and the robot is float64).
     """
-    dtype = np.dtype(jnp.result_type(robot.base.dtype, jnp.asarray(q).dtype))
-    is64 = dtype == np.float64
-    Ts = forward_pass(robot, check_q(robot, q, fn="assert_jacobian_consistent"))
+    q = check_q(robot, q, fn="assert_jacobian_consistent")
+    is64 = result_dtype(robot, q) == np.float64
+    Ts = forward_pass(robot, q)
     reach = float(jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1)))
     tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
     fd = finite_differences if finite_differences is not None else is64

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ._checks import check_q
 from .errors import JaxkinError
 
 __all__ = [
@@ -85,6 +86,12 @@ def _poses(robot, qs: np.ndarray) -> np.ndarray:
 
 
 def _check_qs(robot, qs: Any, what: str = "q", batch: bool = False) -> np.ndarray:
+    """Joint values as float64 numpy (1, dof), or (n_steps, dof) for a trajectory."""
+    if not batch:
+        q = check_q(robot, qs, what=what, fn="jaxkin.viz")
+        if not np.all(np.isfinite(np.asarray(q))):
+            raise JaxkinError(f"{what} contains non-finite values.")
+        return np.asarray(q, dtype=float)[None]
     try:
         arr = np.asarray(qs, dtype=float)
     except (TypeError, ValueError):
