@@ -132,7 +132,7 @@ def kinematic_hessian(
 
     Index order against other libraries: Pinocchio's ``getJointKinematicHessian`` (joint frames
     only) returns the buffer of a column-major (6, nv, nv) Eigen tensor as a C-ordered numpy array,
-    so read it as ``P.reshape(nv, nv, 6)[k, j, :] == H[k, :, j]`` (ORACLES.md: "H[k, j, i]");
+    so read it as ``P.reshape(nv, nv, 6)[k, j, :] == H[k, :, j]`` (tests/README.md: "H[k, j, i]");
     the Robotics Toolbox's ``hessian0(q)`` is (n, 6, n) and equals ``H`` for
     ``reference="world_aligned"`` at the tip.
     """

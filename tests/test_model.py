@@ -153,7 +153,7 @@ def test_float32_within_float32_tolerance(robot_q):
     eps32 = np.finfo(np.float32).eps
     tol = 4 * eps32 * (1 + float(np.max(np.abs(q)))) * reach * robot32.dof * 4
     np.testing.assert_allclose(np.asarray(J32), J64, rtol=0, atol=tol)
-    # hand-built vs autodiff within float32 (ORACLES.md: 1e-6 scaled by reach)
+    # hand-built vs autodiff within float32 (tests/README.md: 1e-6 scaled by reach)
     Jf = np.asarray(jk.jacobian_fwd(robot32, q32))
     np.testing.assert_allclose(np.asarray(J32), Jf, rtol=0, atol=1e-6 * reach * robot32.dof)
 

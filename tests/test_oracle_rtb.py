@@ -7,7 +7,7 @@ For PUMA 560, UR5, Panda, Stanford arm and the SCARA (RTB's ``Cobra600``):
 * at 50 random configurations within the limits (fixed seed), jaxkin ``fk`` (tip, tool included)
   and ``fk_all`` equal RTB ``fkine`` / ``fkine_all``; ``geometric_jacobian`` with
   ``reference="world_aligned"`` equals ``jacob0``, ``"local"`` equals ``jacobe`` and ``"world"``
-  equals ``[Jv + skew(p) Jw; Jw]`` of ``jacob0`` (ORACLES.md), to ``1e-12 * max(1, reach)``;
+  equals ``[Jv + skew(p) Jw; Jw]`` of ``jacob0`` (tests/README.md), to ``1e-12 * max(1, reach)``;
 * ``analytical_jacobian(representation="rpy")`` equals RTB ``jacob0_analytical(q, "rpy/zyx")``
   (spatialmath's "zyx" order is R = Rz(yaw) Ry(pitch) Rx(roll) with the vector ordered
   (roll, pitch, yaw): jaxkin's "rpy"; checked below), to 1e-9 where |cos(pitch)| >= 1e-3.

@@ -1,6 +1,6 @@
 """Real robot files against MuJoCo: MuJoCo's own URDF importer and ``mj_jac`` at an offset point.
 
-MuJoCo loads each URDF with the compiler settings of ORACLES.md (``fusestatic="false"`` so that
+MuJoCo loads each URDF with the compiler settings of tests/README.md (``fusestatic="false"`` so that
 fixed-joint links stay bodies, ``discardvisual``, ``balanceinertia``; plus ``boundmass`` and
 ``boundinertia`` because the visual and collision meshes are stripped before loading, so no mesh
 file is looked for). At the shared 25 random configurations (``_urdf_support.oracle_case``, no

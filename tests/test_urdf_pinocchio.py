@@ -253,7 +253,7 @@ def test_corpus_robot_matches_pinocchio(name):
 
 
 def test_float32_panda_within_float32_tolerance():
-    """float32 loads and agrees with Pinocchio (float64) to ORACLES.md's float32 bound
+    """float32 loads and agrees with Pinocchio (float64) to tests/README.md's float32 bound
     ``4 * eps32 * (1 + max|q|) * reach * dof``."""
     path = case_path("erd/panda")
     robot = jk.load_urdf(path, dtype=np.float32)
