@@ -15,22 +15,29 @@ one of them without touching the others:
    shape by repeating the last row, so it never recompiles) and places it on the device.
    Sharding enters here and in :func:`_chunking`: place the chunk with a ``NamedSharding`` over
    a device mesh, and round the chunk size up to a multiple of the device count.
-3. :func:`_drain` copies a finished chunk's results, padding dropped, into the host outputs.
+3. :func:`_drain` hands a finished chunk's results, padding dropped, to the host outputs: numpy
+   arrays, a sink, or a :class:`ResultWriter` streaming them to an npz, CSV or directory.
 
 While one chunk is drained the next is already running (JAX dispatches asynchronously).
 """
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import dataclasses
+import io
 import math
 import os
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 import zipfile
-from collections.abc import Callable, Iterable, Iterator
+import zlib
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any, TextIO
 
 import jax
@@ -39,7 +46,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .errors import JaxkinError, ShapeError
 
-__all__ = ["MapStats", "ProgressBar", "chunked_map", "stream_map"]
+__all__ = ["MapStats", "ProgressBar", "ResultWriter", "chunked_map", "stream_map"]
 
 DEFAULT_CHUNK_SIZE = 65536
 
@@ -205,18 +212,26 @@ def chunked_map(
 
     Args:
       fn: per-row function; pure and jittable.
-      *arrays: one or more array-likes (numpy, ``np.memmap``, JAX), all of leading length ``N``.
-        They are read chunk by chunk on the host; a JAX array is copied to the host first.
+      *arrays: one or more inputs, all of leading length ``N``: array-likes (numpy, JAX; a JAX
+        array is copied to the host first), or row sources read slice by slice, never whole
+        (``np.memmap``, an h5py or zarr dataset, any object with ``shape``, ``dtype`` and
+        ``source[start:stop]``), so inputs larger than memory stream too.
       chunk_size: most rows per compiled call (>= 1). Memory on the device is about ``c``
         times the per-row footprint of ``fn``'s intermediates; the default suits a CPU.
       progress: True for a :class:`ProgressBar` on stderr (shown on a terminal only), or a
         :class:`ProgressBar` to update (its ``total`` should be ``N``).
-      out: optional pytree of writable arrays (e.g. ``np.memmap``) with the structure of ``fn``'s
-        output and leaf shapes ``(N, *leaf_shape)``, into which results are written; or a path:
-        ``"results.npz"`` (an uncompressed npz) or a directory (one ``.npy`` per output leaf,
-        loadable with ``np.load(..., mmap_mode="r")``). Path outputs are written chunk by chunk
-        to disk (never held in memory, so they may exceed it) and appear atomically at the end;
-        the function then returns the path.
+      out: where results go:
+
+        * a pytree of writable arrays (e.g. ``np.memmap``) with the structure of ``fn``'s output
+          and leaf shapes ``(N, *leaf_shape)``, filled in place;
+        * a path: ``"results.npz"`` (an uncompressed npz), ``"results.csv"`` or a directory (one
+          ``.npy`` per output leaf, loadable with ``np.load(..., mmap_mode="r")``), named after
+          the leaves' paths (``{"J": ...}`` gives ``J.npy``). Written by a :class:`ResultWriter`
+          chunk by chunk (never held in memory, so they may exceed it); the file appears
+          atomically at the end and the function returns its absolute path;
+        * a sink: an object with an ``append(chunk)`` method (e.g. an open
+          :class:`ResultWriter`), called with each chunk's results (``fn``'s pytree, numpy
+          leaves, padding dropped) in row order; returned as is.
       return_stats: also return a :class:`MapStats` with compile and run times.
       devices: where each chunk runs. None (default) or ``"all"``: every device JAX sees
         (``jax.devices()``: all GPUs, or all hosts' devices after ``jax.distributed.initialize``);
@@ -227,55 +242,47 @@ def chunked_map(
 
     Returns:
       The pytree ``fn`` returns, each leaf a numpy array of shape ``(N, *leaf_shape)`` (``out``
-      itself when given); with ``return_stats=True`` the pair ``(result, stats)``.
+      itself when given; the path for a path); with ``return_stats=True`` the pair
+      ``(result, stats)``.
 
     Raises:
       ShapeError: no arrays, an array without a leading axis, unequal leading lengths, or an
         ``out`` that does not match ``fn``'s output.
-      JaxkinError: ``chunk_size`` is not a positive integer.
+      JaxkinError: ``chunk_size`` is not a positive integer; an ``out`` path whose directory is
+        missing, or output leaves whose names coincide once made file names.
+      OSError: writing an ``out`` path failed (disk full...); nothing is left under its name.
     """
     if not callable(fn):
         raise JaxkinError(f"chunked_map: fn must be callable, got {type(fn).__name__}.")
     host, n = _check_inputs(arrays)
     mesh = _mesh(devices)
     chunk, n_chunks = _chunking(chunk_size, n, mesh.size)
-    path = os.fspath(out) if isinstance(out, (str, os.PathLike)) else None
 
     bar = progress if isinstance(progress, ProgressBar) else ProgressBar(n, enabled=bool(progress))
-    writer = None
     try:
         t0 = time.perf_counter()
         traced = _trace(fn, host, chunk, mesh)
-        if path is not None:
-            writer = _FileWriter(path, traced.out_info, n)
-            results = None
-        else:
-            results = _allocate(traced.out_info, n, out)  # checks out= before the compile
-        if n_chunks:
-            bar.note(f"compiling for chunks of {chunk:,} rows ...")
-            compiled = traced.lower().compile()
-        compile_seconds = time.perf_counter() - t0
-
-        bar.start()
-        t0 = time.perf_counter()
-        pending = None  # (start, stop, device results) of the chunk in flight
-        for k in range(n_chunks):
-            start = k * chunk
-            stop = min(start + chunk, n)
-            running = (start, stop, compiled(*_feed(host, start, chunk, n, mesh)))
+        with _target(out, traced.out_info, n) as (results, put):
+            if n_chunks:
+                bar.note(f"compiling for chunks of {chunk:,} rows ...")
+                compiled = traced.lower().compile()
+            compile_seconds = time.perf_counter() - t0
+            bar.start()
+            t0 = time.perf_counter()
+            pending = None  # (start, stop, device results) of the chunk in flight
+            for k in range(n_chunks):
+                start = k * chunk
+                stop = min(start + chunk, n)
+                running = (start, stop, compiled(*_feed(host, start, chunk, n, mesh)))
+                if pending is not None:
+                    _drain(put, *pending)
+                    bar.update(pending[1] - pending[0])
+                pending = running
             if pending is not None:
-                _drain(results if writer is None else writer, *pending)
+                _drain(put, *pending)
                 bar.update(pending[1] - pending[0])
-            pending = running
-        if pending is not None:
-            _drain(results if writer is None else writer, *pending)
-            bar.update(pending[1] - pending[0])
-        if writer is not None:
-            results = writer.commit()
     finally:
         bar.close()
-        if writer is not None:
-            writer.abort()
     run_seconds = time.perf_counter() - t0
 
     if not return_stats:
@@ -289,6 +296,35 @@ def chunked_map(
         run_seconds=run_seconds,
     )
     return results, stats
+
+
+@contextlib.contextmanager
+def _target(out: Any, out_info: Any, n: int) -> Iterator[tuple[Any, Callable[..., None]]]:
+    """``(what chunked_map returns, put(start, stop, host chunk))`` for each kind of ``out``; a
+    path is committed when the block ends normally and removed when it raises."""
+    if isinstance(out, (str, os.PathLike)):
+        names = _leaf_names(out_info)
+        specs = jax.tree_util.tree_leaves(out_info)
+        fields = {k: (s.shape[1:], s.dtype) for k, s in zip(names, specs, strict=True)}
+        with ResultWriter(out, fields, n) as writer:
+
+            def put(start: int, stop: int, tree: Any) -> None:
+                writer.append(dict(zip(names, jax.tree_util.tree_leaves(tree), strict=True)))
+
+            yield writer.path, put
+            writer.commit()
+    elif callable(getattr(out, "append", None)) and not isinstance(out, list):
+        yield out, lambda start, stop, tree: out.append(tree)
+    else:
+        results = _allocate(out_info, n, out)  # checks out= before the compile
+
+        def put(start: int, stop: int, tree: Any) -> None:
+            def copy(dst: np.ndarray, src: np.ndarray) -> None:
+                dst[start:stop] = src
+
+            jax.tree_util.tree_map(copy, results, tree)
+
+        yield results, put
 
 
 def stream_map(
@@ -305,35 +341,81 @@ def stream_map(
     and each finished chunk's results are yielded as a pytree of numpy arrays (padding dropped),
     in order. Memory holds about two chunks, whatever the stream's length: use it for
     configurations generated on the fly or read from disk.
+
+    ``fn`` is compiled for the first batch's number of inputs, dtypes and shapes after the row
+    axis; a later batch that differs raises :class:`~jaxkin.ShapeError` naming both.
     """
     mesh = _mesh(devices)
     chunk, _ = _chunking(chunk_size, max(int(chunk_size), 1), mesh.size)
-    compiled = None
-    buffer: list[list[np.ndarray]] = []
+    compiled, signature = None, None
+    queue: collections.deque[list[Any]] = collections.deque()
     buffered = 0
 
-    def run(parts: list[list[np.ndarray]], rows: int):
-        host = [np.concatenate(cols) for cols in zip(*parts, strict=True)]
+    def run(rows: int):
+        host = _take(queue, rows)
         out = compiled(*_feed(host, 0, chunk, rows, mesh))
-        return jax.tree_util.tree_map(lambda x: np.asarray(x)[:rows], out)
+        return jax.tree_util.tree_map(lambda x: _to_host(x)[:rows], out)
 
-    for item in batches:
-        arrays = item if isinstance(item, tuple) else (item,)
-        host, _ = _check_inputs(arrays)
+    for index, item in enumerate(batches):
+        host, rows = _check_inputs(item if isinstance(item, tuple) else (item,))
+        got = [(np.dtype(a.dtype).name, tuple(a.shape[1:])) for a in host]
         if compiled is None:
-            compiled = _trace(fn, host, chunk, mesh).lower().compile()
-        buffer.append(host)
-        buffered += host[0].shape[0]
+            compiled, signature = _trace(fn, host, chunk, mesh).lower().compile(), got
+        elif got != signature:
+            raise ShapeError(
+                f"stream_map: batch {index} has inputs (dtype, row shape) {got}, but fn was "
+                f"compiled for the first batch's {signature}. Give every batch the same inputs, "
+                "dtypes and shapes after the row axis (convert with np.asarray(x, dtype))."
+            )
+        if rows:
+            queue.append(host)
+            buffered += rows
         while buffered >= chunk:
-            joined = [np.concatenate(cols) for cols in zip(*buffer, strict=True)]
-            yield run([[a[:chunk] for a in joined]], chunk)
-            rest = [a[chunk:] for a in joined]
-            buffer, buffered = ([rest], rest[0].shape[0]) if rest[0].shape[0] else ([], 0)
+            yield run(chunk)
+            buffered -= chunk
     if buffered:
-        yield run(buffer, buffered)
+        yield run(buffered)
 
 
-def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[np.ndarray], int]:
+def _take(queue: collections.deque[list[Any]], rows: int) -> list[np.ndarray]:
+    """The first ``rows`` rows of the queued batches, removed from the queue and joined."""
+    parts, need = [], rows
+    while need:
+        head = queue[0]
+        k = head[0].shape[0]
+        if k <= need:
+            parts.append(queue.popleft())
+            need -= k
+        else:
+            parts.append([a[:need] for a in head])
+            queue[0] = [a[need:] for a in head]
+            need = 0
+    return [np.concatenate(cols) if len(cols) > 1 else cols[0] for cols in zip(*parts, strict=True)]
+
+
+class _Rows:
+    """A row source (``shape``, ``dtype``, ``source[start:stop]``) read slice by slice, each slice
+    converted to ``dtype``."""
+
+    def __init__(self, source: Any, dtype: np.dtype) -> None:
+        self.source = source
+        self.shape = tuple(int(s) for s in source.shape)
+        self.dtype = dtype
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        return np.asarray(self.source[rows], dtype=self.dtype)
+
+
+def _is_row_source(a: Any) -> bool:
+    return (
+        not isinstance(a, (np.ndarray, jax.Array, list, tuple))
+        and isinstance(getattr(a, "shape", None), tuple)
+        and hasattr(a, "dtype")
+        and hasattr(a, "__getitem__")
+    )
+
+
+def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[Any], int]:
     if not arrays:
         raise ShapeError(
             "chunked_map needs at least one input array, e.g. chunked_map(fn, qs) with qs of "
@@ -342,17 +424,20 @@ def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[np.ndarray], int]:
     host = []
     for i, a in enumerate(arrays):
         try:
-            arr = np.asarray(a)
+            arr = a if _is_row_source(a) else np.asarray(a)
         except (TypeError, ValueError) as e:
             raise ShapeError(f"chunked_map: input {i} is not array-like ({e}).") from None
-        if arr.ndim == 0:
+        if len(arr.shape) == 0:
             raise ShapeError(
                 f"chunked_map: input {i} must have a leading batch axis (shape (N, ...)), got a "
                 "scalar. Close over values shared by every row in fn instead of passing them."
             )
         # JAX's own dtype (float32 while x64 is off), so the compiled call accepts the chunks.
-        dtype = jax.dtypes.canonicalize_dtype(arr.dtype)
-        host.append(arr if arr.dtype == dtype else arr.astype(dtype))
+        dtype = jax.dtypes.canonicalize_dtype(np.dtype(arr.dtype))
+        if _is_row_source(arr):
+            host.append(_Rows(arr, dtype))
+        else:
+            host.append(arr if arr.dtype == dtype else arr.astype(dtype))
     lengths = [a.shape[0] for a in host]
     if len(set(lengths)) > 1:
         shapes = ", ".join(f"input {i}: {a.shape}" for i, a in enumerate(host))
@@ -416,15 +501,13 @@ def _trace(
     return jax.jit(jax.vmap(fn), out_shardings=sharding).trace(*specs)
 
 
-def _feed(host: list[np.ndarray], start: int, chunk: int, n: int, mesh: Mesh) -> list[jax.Array]:
+def _feed(host: list[Any], start: int, chunk: int, n: int, mesh: Mesh) -> list[jax.Array]:
     """Rows ``start : start + chunk`` of every input, split over the mesh's devices; past ``n``
     the last row repeats (padding)."""
     stop = start + chunk
-    if stop <= n:
-        rows = [a[start:stop] for a in host]
-    else:
-        index = np.minimum(np.arange(start, stop), n - 1)
-        rows = [a[index] for a in host]
+    rows = [a[start : min(stop, n)] for a in host]
+    if stop > n:
+        rows = [np.concatenate([r, np.repeat(r[-1:], stop - n, axis=0)]) for r in rows]
     sharding = NamedSharding(mesh, PartitionSpec("rows"))
     return [jax.device_put(r, sharding) for r in rows]
 
@@ -469,78 +552,435 @@ def _to_host(x: jax.Array) -> np.ndarray:
     return np.asarray(x)
 
 
-def _drain(results: Any, start: int, stop: int, device_out: Any) -> None:
-    """Copy rows ``0 : stop - start`` of a finished chunk into ``results[start:stop]`` (host
-    arrays) or append them to a :class:`_FileWriter`."""
-    if isinstance(results, _FileWriter):
-        results.append(jax.tree_util.tree_map(lambda x: _to_host(x)[: stop - start], device_out))
-        return
-
-    def copy(dst: np.ndarray, src: jax.Array) -> None:
-        dst[start:stop] = _to_host(src)[: stop - start]
-
-    jax.tree_util.tree_map(copy, results, device_out)
+def _drain(put: Callable[..., None], start: int, stop: int, device_out: Any) -> None:
+    """Hand rows ``0 : stop - start`` of a finished chunk, on the host, to ``put``."""
+    put(start, stop, jax.tree_util.tree_map(lambda x: _to_host(x)[: stop - start], device_out))
 
 
-class _FileWriter:
-    """Writes each output leaf as a ``.npy`` file, chunk after chunk, then publishes them.
+def _leaf_names(out_info: Any) -> list[str]:
+    """File names (without ``.npy``) of the output leaves; refuses two leaves that would share
+    one, e.g. keys ``"J v"`` and ``"J_v"``."""
+    names: dict[str, str] = {}
+    for path, _ in jax.tree_util.tree_leaves_with_path(out_info):
+        where = jax.tree_util.keystr(path)
+        name = "".join(c if c.isalnum() or c in "_-" else "_" for c in where).strip("_") or "out"
+        if name in names:
+            raise JaxkinError(
+                f"chunked_map: output leaves {names[name] or 'out'} and {where} would both be "
+                f"written as {name!r}; rename one of them (letters, digits, '_' and '-' are kept, "
+                "other characters become '_')."
+            )
+        names[name] = where
+    return list(names)
 
-    ``path`` ending in ``.npz``: an uncompressed npz (a zip of the ``.npy`` files); otherwise a
-    directory of ``.npy`` files. Everything is written to a temporary sibling first and renamed
-    into place at :meth:`commit`, so an interruption never leaves a half-written result.
+
+# ---------------------------------------------------------------------- result files
+RESULT_FORMATS = ("npz", "csv", "dir")
+
+
+class ResultWriter:
+    """Named arrays streamed to a file chunk by chunk, appearing complete under ``path`` or not
+    at all.
+
+    ``fields`` maps each name to ``(row_shape, dtype)``: the file holds, per name, an array of
+    shape ``(n, *row_shape)``, appended in row order by :meth:`append`; ``meta`` adds small
+    arrays written whole (labels, settings). Formats (``format=``, default from the suffix):
+
+    * ``"npz"`` (``*.npz``): an uncompressed zip64 ``.npz``. Every member's size is known up
+      front, so each is written in place into its own region of the file: no staging copy, the
+      disk holds the file once;
+    * ``"csv"`` (``*.csv``, or ``path="-"`` for standard output): one line per row; ``columns``
+      maps the fields to write to their column names (default: every field, ``name`` or
+      ``name_1 ... name_k``); ``comments`` become ``#`` lines above the header (default:
+      ``meta``);
+    * ``"dir"`` (any other path): a new directory of ``name.npy`` files
+      (``np.load(..., mmap_mode="r")`` reads them without loading).
+
+    Everything is written to a temporary sibling of ``path``, named ``.<name>.<random>.tmp``
+    (a file, or a directory for ``"dir"``), then flushed, ``fsync``-ed, given ordinary
+    permissions (``0o666``/``0o777`` less the umask) and renamed onto ``path``. Use it as a
+    context manager: leaving the block without :meth:`commit` (an exception, Ctrl-C, SIGTERM)
+    removes the temporary. Inside the block SIGTERM raises ``SystemExit(143)`` (or runs the
+    handler installed before) so that this cleanup runs, and SIGXFSZ is ignored so that a file
+    size limit is an ``OSError``; both handlers are restored on exit (main thread only). Only
+    SIGKILL or a crash can leave the temporary behind.
+
+    Example::
+
+        with ResultWriter("r.npz", {"x": ((2,), "float64")}, n=3, meta={"note": "demo"}) as w:
+            w.append({"x": np.ones((2, 2))})
+            w.append({"x": np.zeros((1, 2))})
+            w.commit()  # r.npz appears, holding x (3, 2) and note
     """
 
-    def __init__(self, path: str, out_info: Any, n: int) -> None:
-        self.path = os.path.abspath(path)
-        parent = os.path.dirname(self.path) or "."
-        if not os.path.isdir(parent):
-            raise JaxkinError(f"chunked_map: directory {parent!r} for out does not exist.")
-        if os.path.exists(self.path) and not self.path.endswith(".npz"):
-            raise JaxkinError(f"chunked_map: out {path!r} already exists; choose a new path.")
-        self.tmp = tempfile.mkdtemp(prefix=".jaxkin-", dir=parent)
-        leaves = jax.tree_util.tree_leaves_with_path(out_info)
-        self.names = [_leaf_name(p) or "out" for p, _ in leaves]
-        self.files = []
-        for name, (_, spec) in zip(self.names, leaves, strict=True):
-            f = open(os.path.join(self.tmp, f"{name}.npy"), "wb")
-            header = {
-                "descr": np.lib.format.dtype_to_descr(np.dtype(spec.dtype)),
-                "fortran_order": False,
-                "shape": (n, *spec.shape[1:]),
-            }
-            np.lib.format.write_array_header_1_0(f, header)
-            self.files.append(f)
-        self.treedef = jax.tree_util.tree_structure(out_info)
-        self.done = False
+    def __init__(
+        self,
+        path: Any,
+        fields: Mapping[str, tuple[Any, Any]],
+        n: int,
+        *,
+        format: str | None = None,
+        meta: Mapping[str, Any] | None = None,
+        columns: Mapping[str, Sequence[str]] | None = None,
+        comments: Sequence[str] | None = None,
+    ) -> None:
+        text = os.fspath(path)
+        self.format = _result_format(text, format)
+        self.path = text if text == "-" else os.path.abspath(text)
+        self.fields = {k: (tuple(int(d) for d in s), np.dtype(t)) for k, (s, t) in fields.items()}
+        self.meta = {k: np.asarray(v) for k, v in (meta or {}).items()}
+        _check_names([*self.fields, *self.meta], self.format)
+        self.n, self.rows, self.tmp = int(n), 0, None
+        self._saved: list[tuple[int, Any]] = []
+        if self.format == "csv":
+            columns = columns or {k: _default_columns(k, s) for k, (s, _) in self.fields.items()}
+            if comments is None:
+                comments = [f"{k} = {v}" for k, v in self.meta.items()]
+            self._file: Any = _CsvFile(self.fields, self.n, columns, comments)
+        elif self.format == "npz":
+            self._file = _NpzFile(self.fields, self.n, self.meta)
+        else:
+            self._file = _DirFile(self.fields, self.n, self.meta)
+        if self.path == "-":
+            self._file.open(sys.stdout)
+            return
+        self._check_target()
+        self._open()
 
-    def append(self, chunk_out: Any) -> None:
-        for f, leaf in zip(self.files, jax.tree_util.tree_leaves(chunk_out), strict=True):
-            f.write(np.ascontiguousarray(leaf).tobytes())
+    def _check_target(self) -> None:
+        parent = os.path.dirname(self.path)
+        if not os.path.isdir(parent):
+            raise JaxkinError(
+                f"cannot write {self.path}: directory {parent} does not exist; create it or "
+                "choose another path."
+            )
+        if self.format == "dir" and os.path.lexists(self.path):
+            raise JaxkinError(f"out {self.path!r} already exists; choose a new path.")
+        if os.path.isdir(self.path):
+            raise JaxkinError(f"output path {self.path} is a directory; give a file name.")
+        need, free = self._file.size_estimate(), shutil.disk_usage(parent).free
+        if need > free:
+            raise JaxkinError(
+                f"cannot write {self.path}: it needs about {need / 1e9:,.1f} GB and {parent} has "
+                f"{free / 1e9:,.1f} GB free; write fewer rows or elsewhere."
+            )
+
+    def _open(self) -> None:
+        parent, name = os.path.split(self.path)
+        try:
+            if self.format == "dir":
+                self.tmp = tempfile.mkdtemp(prefix=f".{name}.", suffix=".tmp", dir=parent)
+                self._file.open(self.tmp)
+            else:
+                fd, self.tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=parent)
+                self._file.open(os.fdopen(fd, "w+b"))
+        except OSError as e:
+            self.abort()
+            raise OSError(e.errno, e.strerror, self.path) from None
+
+    def append(self, rows: Mapping[str, Any]) -> None:
+        """Append the next rows: ``rows[name]`` of shape ``(k, *row_shape)`` for every field,
+        one ``k`` for all."""
+        if self._file is None:
+            raise JaxkinError(f"ResultWriter for {self.path}: append after commit or abort.")
+        missing = set(self.fields) - set(rows)
+        if missing:
+            raise ShapeError(f"ResultWriter.append: no rows for field(s) {sorted(missing)}.")
+        arrays = {k: np.ascontiguousarray(rows[k], dtype=t) for k, (_, t) in self.fields.items()}
+        counts = {a.shape[0] if a.ndim else -1 for a in arrays.values()}
+        bad = [k for k, a in arrays.items() if a.shape[1:] != self.fields[k][0]]
+        if len(counts) != 1 or bad or self.rows + max(counts) > self.n:
+            shapes = {k: a.shape for k, a in arrays.items()}
+            raise ShapeError(
+                f"ResultWriter.append: rows of shapes {shapes} do not fit fields "
+                f"{ {k: s for k, (s, _) in self.fields.items()} } with {self.n - self.rows} of "
+                f"{self.n} rows left; give (k, *row_shape) arrays, one k for all."
+            )
+        self._io(self._file.append, arrays)
+        self.rows += counts.pop()
 
     def commit(self) -> str:
-        for f in self.files:
-            f.close()
-        if self.path.endswith(".npz"):
-            staged = os.path.join(self.tmp, "result.npz")
-            with zipfile.ZipFile(staged, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
-                for name in self.names:
-                    z.write(os.path.join(self.tmp, f"{name}.npy"), arcname=f"{name}.npy")
-            os.replace(staged, self.path)
-        else:
-            os.replace(self.tmp, self.path)
-            self.tmp = None
-        self.done = True
+        """Finish the file and rename it onto ``path`` (replacing a previous file); returns
+        ``path``. Every one of the ``n`` rows must have been appended."""
+        if self._file is None:
+            raise JaxkinError(f"ResultWriter for {self.path}: commit after commit or abort.")
+        if self.rows != self.n:
+            raise JaxkinError(
+                f"ResultWriter for {self.path}: {self.rows} of {self.n} rows were appended; "
+                "nothing was written."
+            )
+        self._io(self._file.close)
+        self._file = None
+        if self.tmp is not None:
+            self._io(self._publish)
         return self.path
 
-    def abort(self) -> None:
-        for f in self.files:
-            if not f.closed:
-                f.close()
-        if self.tmp is not None and os.path.isdir(self.tmp):
-            shutil.rmtree(self.tmp, ignore_errors=True)
+    def _publish(self) -> None:
+        mask = _umask()
+        os.chmod(self.tmp, (0o777 if self.format == "dir" else 0o666) & ~mask)
+        os.replace(self.tmp, self.path)
         self.tmp = None
+        _fsync_dir(os.path.dirname(self.path))
+
+    def _io(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """Run a write step; an OSError names ``path`` (not the temporary)."""
+        try:
+            return fn(*args)
+        except OSError as e:
+            raise OSError(e.errno, e.strerror, self.path) from None
+
+    def abort(self) -> None:
+        """Remove the temporary; ``path`` is left as it was (idempotent)."""
+        if self._file is not None:
+            with contextlib.suppress(OSError):
+                self._file.discard()
+            self._file = None
+        if self.tmp is not None:
+            if os.path.isdir(self.tmp):
+                shutil.rmtree(self.tmp, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    os.remove(self.tmp)
+            self.tmp = None
+
+    def __enter__(self) -> ResultWriter:
+        if threading.current_thread() is threading.main_thread():
+            self._saved = [(signal.SIGTERM, signal.getsignal(signal.SIGTERM))]
+            if self._saved[0][1] != signal.SIG_IGN:
+                signal.signal(signal.SIGTERM, self._terminated)
+            if hasattr(signal, "SIGXFSZ"):
+                self._saved.append((signal.SIGXFSZ, signal.signal(signal.SIGXFSZ, signal.SIG_IGN)))
+        return self
+
+    def _terminated(self, signum: int, frame: Any) -> None:
+        previous = self._saved[0][1]
+        if callable(previous):
+            previous(signum, frame)
+            return
+        raise SystemExit(128 + signum)
+
+    def __exit__(self, *exc: Any) -> None:
+        try:
+            self.abort()
+        finally:
+            for sig, handler in reversed(self._saved):
+                signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+            self._saved = []
 
 
-def _leaf_name(path) -> str:
-    name = jax.tree_util.keystr(path)
-    return "".join(c if c.isalnum() or c in "_-" else "_" for c in name).strip("_")
+def _result_format(path: str, format: str | None) -> str:
+    suffix = "csv" if path == "-" else os.path.splitext(path)[1].lower().lstrip(".")
+    if format is None:
+        return suffix if suffix in ("npz", "csv") else "dir"
+    if format not in RESULT_FORMATS:
+        raise JaxkinError(f"format must be one of {RESULT_FORMATS}, got {format!r}.")
+    if (suffix in ("npz", "csv") and suffix != format) or (path == "-" and format != "csv"):
+        where = "standard output ('-')" if path == "-" else f"{path!r}"
+        raise JaxkinError(
+            f"format {format!r} contradicts {where}: "
+            + ("only csv goes to standard output" if path == "-" else f"a .{suffix} name")
+            + "; change the name or the format."
+        )
+    return format
+
+
+def _check_names(names: list[str], fmt: str) -> None:
+    seen: dict[str, str] = {}
+    for name in names:
+        if not name or not all(c.isalnum() or c in "_-." for c in name) or name[0] == ".":
+            raise JaxkinError(
+                f"cannot write an array named {name!r}: use letters, digits, '_', '-' and '.'."
+            )
+        key = name.lower() if fmt == "dir" else name  # case-insensitive file systems
+        if key in seen:
+            raise JaxkinError(f"two arrays would be written as {name!r} ({seen[key]!r}).")
+        seen[key] = name
+
+
+def _default_columns(name: str, shape: tuple[int, ...]) -> list[str]:
+    k = math.prod(shape)
+    return [name] if shape == () else [f"{name}_{i + 1}" for i in range(k)]
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where /proc allows."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_dir(path: str) -> None:
+    with contextlib.suppress(OSError):  # not every platform opens directories
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _npy_header(shape: tuple[int, ...], dtype: np.dtype) -> bytes:
+    buf = io.BytesIO()
+    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": shape}
+    np.lib.format.write_array_header_2_0(buf, header)
+    return buf.getvalue()
+
+
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, array, allow_pickle=False)
+    return buf.getvalue()
+
+
+def _row_bytes(shape: tuple[int, ...], dtype: np.dtype) -> int:
+    return math.prod(shape) * dtype.itemsize
+
+
+class _NpzFile:
+    """An uncompressed zip64 npz whose members are written in place: each member's local
+    header and size are laid out when opened, chunks go to each member's next free offset,
+    CRCs are patched into the headers and the central directory is appended at close."""
+
+    def __init__(self, fields: dict, n: int, meta: dict[str, np.ndarray]) -> None:
+        self.members = [(k, _npy_bytes(v), 0) for k, v in meta.items()]
+        for k, (shape, dtype) in fields.items():
+            self.members.append((k, _npy_header((n, *shape), dtype), n * _row_bytes(shape, dtype)))
+
+    def size_estimate(self) -> int:
+        return sum(len(head) + size + 200 for _, head, size in self.members)
+
+    def open(self, f: Any) -> None:
+        self.f, self.infos, self.at, self.crc, pos = f, [], {}, {}, 0
+        stamp = time.localtime()[:6]
+        for name, head, size in self.members:
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=stamp)
+            info.file_size = info.compress_size = len(head) + size
+            info.CRC = 0  # patched at close
+            info.header_offset = pos
+            local = info.FileHeader(zip64=True)
+            f.seek(pos)
+            f.write(local + head)
+            self.infos.append(info)
+            self.at[name], self.crc[name] = pos + len(local) + len(head), zlib.crc32(head)
+            pos += len(local) + info.file_size
+        self.end = pos
+
+    def append(self, arrays: dict[str, np.ndarray]) -> None:
+        for name, a in arrays.items():
+            self.f.seek(self.at[name])
+            self.f.write(memoryview(a).cast("B"))
+            self.at[name] += a.nbytes
+            self.crc[name] = zlib.crc32(memoryview(a).cast("B"), self.crc[name])
+
+    def close(self) -> None:
+        for info, (name, _, _) in zip(self.infos, self.members, strict=True):
+            info.CRC = self.crc[name]
+            self.f.seek(info.header_offset)
+            self.f.write(info.FileHeader(zip64=True))
+        self.f.seek(self.end)
+        zf = zipfile.ZipFile(self.f, "w", allowZip64=True)  # writes the central directory only
+        zf.filelist.extend(self.infos)
+        zf.NameToInfo.update({i.filename: i for i in self.infos})
+        zf.close()
+        _sync_close(self.f)
+
+    def discard(self) -> None:
+        self.f.close()
+
+
+def _sync_close(f: Any) -> None:
+    f.flush()
+    os.fsync(f.fileno())
+    f.close()
+
+
+class _DirFile:
+    """A directory of ``.npy`` files, one per field, each appended chunk by chunk."""
+
+    def __init__(self, fields: dict, n: int, meta: dict[str, np.ndarray]) -> None:
+        self.fields, self.n, self.meta, self.files = fields, n, meta, {}
+
+    def size_estimate(self) -> int:
+        rows = sum(self.n * _row_bytes(s, t) + 256 for s, t in self.fields.values())
+        return rows + sum(v.nbytes + 256 for v in self.meta.values())
+
+    def open(self, directory: str) -> None:
+        self.directory = directory
+        for name, value in self.meta.items():
+            with open(os.path.join(directory, f"{name}.npy"), "wb") as f:
+                f.write(_npy_bytes(value))
+                f.flush()
+                os.fsync(f.fileno())
+        for name, (shape, dtype) in self.fields.items():
+            self.files[name] = open(os.path.join(directory, f"{name}.npy"), "wb")
+            self.files[name].write(_npy_header((self.n, *shape), dtype))
+
+    def append(self, arrays: dict[str, np.ndarray]) -> None:
+        for name, a in arrays.items():
+            self.files[name].write(memoryview(a).cast("B"))
+
+    def close(self) -> None:
+        for f in self.files.values():
+            _sync_close(f)
+        _fsync_dir(self.directory)
+
+    def discard(self) -> None:
+        for f in self.files.values():
+            f.close()
+
+
+class _CsvFile:
+    """One text line per row: the ``columns`` fields side by side, ``%.17g`` (float64) or
+    ``%.9g`` (float32), so values round-trip; ``comments`` as ``#`` lines on top."""
+
+    def __init__(
+        self, fields: dict, n: int, columns: Mapping[str, Sequence[str]], comments
+    ) -> None:
+        unknown = set(columns) - set(fields)
+        if unknown:
+            raise JaxkinError(f"csv columns name unknown fields {sorted(unknown)}.")
+        for name, names in columns.items():
+            if len(names) != math.prod(fields[name][0]):
+                raise JaxkinError(
+                    f"csv: field {name!r} has {math.prod(fields[name][0])} values per row, "
+                    f"but {len(names)} column names."
+                )
+        self.columns, self.comments = dict(columns), list(comments)
+        wide = any(fields[k][1] == np.float64 for k in self.columns)
+        self.digits, self.n_values = (17 if wide else 9), sum(map(len, self.columns.values()))
+        self.n = n
+
+    def size_estimate(self) -> int:
+        return self.n * self.n_values * (self.digits + 7)  # sign, point, exponent, comma
+
+    def open(self, f: Any) -> None:
+        self.f = f
+        names = [c for cols in self.columns.values() for c in cols]
+        lines = [f"# {c}" for c in self.comments] + [",".join(names)]
+        self._write("\n".join(lines) + "\n")
+
+    def _write(self, text: str) -> None:
+        self.f.write(text if isinstance(self.f, io.TextIOBase) else text.encode())
+
+    def append(self, arrays: dict[str, np.ndarray]) -> None:
+        k = next(iter(arrays.values())).shape[0]
+        table = np.concatenate([arrays[c].reshape(k, -1) for c in self.columns], axis=1)
+        buf = io.StringIO()
+        np.savetxt(buf, table, fmt=f"%.{self.digits}g", delimiter=",")
+        self._write(buf.getvalue())
+
+    def close(self) -> None:
+        if isinstance(self.f, io.TextIOBase):  # standard output
+            self.f.flush()
+        else:
+            _sync_close(self.f)
+
+    def discard(self) -> None:
+        if not isinstance(self.f, io.TextIOBase):
+            self.f.close()
