@@ -22,6 +22,26 @@ flat), exactly as ``sqrt(det(J J^T))`` would say.
 Translational and rotational measures do not depend on the basis (``"world_aligned"`` and
 ``"local"`` Jacobians give the same values) but do depend on the point: use the Jacobian of the
 point you care about (for the wrist decoupling below, the wrist centre).
+
+Non-finite input
+----------------
+NaN or inf in an input (a Jacobian, a configuration, a twist or wrench, a target pose, a
+threshold or tolerance) never yields a confident finite answer. One policy, the same for every
+public function of :mod:`jaxkin.analysis`, :mod:`jaxkin.inverse_velocity`,
+:mod:`jaxkin.calibration` and :func:`jaxkin.classify_twist`/:func:`jaxkin.classify_motion`:
+
+* called eagerly (no JAX tracer among the inputs), the function raises
+  :class:`~jaxkin.JaxkinError` naming the argument that holds NaN or inf, before computing;
+* under a trace (``jit``, ``vmap``, ``grad``), where values cannot raise, the result of a call
+  (of each item, under ``vmap``) with a non-finite input is poisoned: floating-point values are
+  NaN (derivatives through them too), boolean flags are True ("possibly singular"), integer
+  counts (:func:`rank`, ``DependentColumns.nullity``) are the sentinel -1, and convergence flags
+  (``converged`` of :func:`jaxkin.calibrate`) are False ("not converged");
+* host-side results (Python strings and lists: :func:`jaxkin.classify_twist`,
+  :func:`jaxkin.identifiability`) cannot be poisoned: those functions raise under a trace too.
+
+Exact singularities are finite input: their values stay finite (or the documented ``inf``), and
+finite inputs give bit for bit the results they gave without the check.
 """
 
 from __future__ import annotations
@@ -33,7 +53,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_J, check_point, check_q, check_reference, is_traced, result_dtype
+from ._checks import (
+    check_J,
+    check_point,
+    check_q,
+    check_reference,
+    finite_guard,
+    is_traced,
+    result_dtype,
+)
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
 from .kinematics import forward_pass
@@ -97,10 +125,13 @@ def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
     )
 
 
-def _select(J: Any, rows: Any, fn: str) -> jax.Array:
-    J = check_J(J, fn)
-    idx = _row_indices(rows, J.shape[0], fn)
-    return J if idx is None else J[jnp.array(idx)]
+def _guarded(J: Any, rows: Any, fn: str, **others: Any):
+    """The selected rows of the checked ``J`` and the non-finite guard of ``J`` and ``others``
+    (module doc, "Non-finite input"): the guard checks all of J, not only the selected rows."""
+    Jc = check_J(J, fn)
+    idx = _row_indices(rows, Jc.shape[0], fn)
+    guard = finite_guard(fn, J=Jc, **others)
+    return (Jc if idx is None else Jc[jnp.array(idx)]), guard
 
 
 def _check_measure(measure: str, fn: str) -> str:
@@ -133,9 +164,11 @@ def singular_values(J: Any, rows: Any = "all") -> jax.Array:
     """Singular values of the selected rows of ``J``, descending; shape (min(m, dof),).
 
     ``m`` is the number of selected rows (6, 3 or ``len(rows)``). Differentiable everywhere
-    (``d sigma_i = u_i^T dJ v_i``), including at repeated and zero singular values.
+    (``d sigma_i = u_i^T dJ v_i``), including at repeated and zero singular values. Non-finite
+    ``J``: see the module doc (raises eagerly; NaN under a trace).
     """
-    return jnp.linalg.svd(_select(J, rows, "jk.singular_values"), compute_uv=False)
+    Jr, guard = _guarded(J, rows, "jk.singular_values")
+    return guard(jnp.linalg.svd(Jr, compute_uv=False))
 
 
 def _default_rtol(shape, dtype) -> float:
@@ -149,12 +182,15 @@ def rank(J: Any, rows: Any = "all", *, rtol: float | None = None, atol: float = 
     ``rtol`` defaults to ``max(m, dof) * eps`` (NumPy's ``matrix_rank``); both thresholds are in
     the Jacobian's units (m/rad or 1). For "is the robot close to a singularity" use
     :func:`near_singular` with a threshold that means something for your task.
+
+    Non-finite ``J``, ``rtol`` or ``atol`` (module doc): raises eagerly; under a trace the rank
+    is the sentinel -1.
     """
-    Jr = _select(J, rows, "jk.rank")
+    Jr, guard = _guarded(J, rows, "jk.rank", rtol=rtol, atol=atol)
     s = jnp.linalg.svd(Jr, compute_uv=False)
     rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
     tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * s[0])
-    return jnp.sum(s > tol).astype(jnp.int32)
+    return guard(jnp.sum(s > tol).astype(jnp.int32))
 
 
 def manipulability(J: Any, measure: str = "yoshikawa", rows: Any = "all") -> jax.Array:
@@ -173,11 +209,17 @@ def manipulability(J: Any, measure: str = "yoshikawa", rows: Any = "all") -> jax
 
     ``rows`` is ``"all"``, ``"translation"`` (rows 0..2), ``"rotation"`` (rows 3..5) or a
     sequence of row indices. ``"all"`` mixes metres and radians. Values and gradients (``jax.grad``
-    with respect to ``J``) are finite at exact singularities.
+    with respect to ``J``) are finite at exact singularities. Non-finite ``J`` (module doc): raises
+    eagerly; NaN under a trace.
     """
     fn = "jk.manipulability"
     _check_measure(measure, fn)
-    s = _task_singular_values(_select(J, rows, fn))
+    Jr, guard = _guarded(J, rows, fn)
+    return guard(_manipulability(Jr, measure))
+
+
+def _manipulability(Jr: jax.Array, measure: str) -> jax.Array:
+    s = _task_singular_values(Jr)
     if measure == "yoshikawa":
         return jnp.prod(s)
     if measure == "min_singular_value":
@@ -189,10 +231,12 @@ def condition_number(J: Any, rows: Any = "all") -> jax.Array:
     """``sigma_1 / sigma_m`` of the selected rows (task-space axes); ``inf`` at a singularity.
 
     For a bounded, differentiable measure use ``manipulability(J, "inverse_condition")``.
+    Non-finite ``J`` (module doc): raises eagerly; NaN (not ``inf``) under a trace.
     """
-    s = _task_singular_values(_select(J, rows, "jk.condition_number"))
+    Jr, guard = _guarded(J, rows, "jk.condition_number")
+    s = _task_singular_values(Jr)
     inv = _safe_ratio(s[-1], s[0])
-    return jnp.where(inv > 0, 1.0 / jnp.where(inv > 0, inv, 1.0), jnp.inf)
+    return guard(jnp.where(inv > 0, 1.0 / jnp.where(inv > 0, inv, 1.0), jnp.inf))
 
 
 def near_singular(
@@ -203,8 +247,14 @@ def near_singular(
     The threshold has no default on purpose: it is in the measure's units (the default measure,
     the smallest singular value, is in m/s or rad/s per rad/s of joint speed) and depends on the
     task. ``measure`` and ``rows`` as in :func:`manipulability`.
+
+    Non-finite ``J`` or ``threshold`` (module doc): raises eagerly; True ("possibly singular")
+    under a trace.
     """
-    return manipulability(J, measure=measure, rows=rows) < threshold
+    fn = "jk.near_singular"
+    _check_measure(measure, fn)
+    Jr, guard = _guarded(J, rows, fn, threshold=threshold)
+    return guard(_manipulability(Jr, measure) < threshold)
 
 
 class DependentColumns(NamedTuple):
@@ -214,6 +264,9 @@ class DependentColumns(NamedTuple):
     coefficient in some null-space vector). ``null_space`` (dof, dof): the first ``nullity``
     columns are an orthonormal basis of the null space (joint velocities that do not move the
     selected task-space rows); the others are zero. ``nullity``: int32 scalar, dof - rank.
+
+    From a non-finite Jacobian under a trace (module doc): ``mask`` all True, ``null_space`` NaN,
+    ``nullity`` -1.
     """
 
     mask: jax.Array
@@ -239,9 +292,12 @@ def dependent_columns(
     are then all parallel).
 
     The basis is returned without derivative (``stop_gradient``): a null-space basis is not a
-    differentiable function of ``J`` where the rank changes.
+    differentiable function of ``J`` where the rank changes. Non-finite ``J`` or tolerances
+    (module doc): raises eagerly; under a trace see :class:`DependentColumns`.
     """
-    Jr = _select(J, rows, "jk.dependent_columns")
+    Jr, guard = _guarded(
+        J, rows, "jk.dependent_columns", rtol=rtol, atol=atol, coefficient_tol=coefficient_tol
+    )
     n = Jr.shape[1]
     _, s, Vt = jnp.linalg.svd(jax.lax.stop_gradient(Jr), full_matrices=True)
     rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
@@ -257,7 +313,7 @@ def dependent_columns(
     order = jnp.argsort(~is_null, stable=True)
     N = N[:, order]
     mask = jnp.any(jnp.abs(N) > coefficient_tol, axis=1)
-    return DependentColumns(mask=mask, null_space=N, nullity=nullity)
+    return guard(DependentColumns(mask=mask, null_space=N, nullity=nullity))
 
 
 def manipulability_gradient(
@@ -276,6 +332,7 @@ def manipulability_gradient(
     it equals ``dm/dq_k = m * vec(J H_k^T) . vec((J J^T)^-1)`` with ``H_k`` the kinematic Hessian
     slice ``jk.kinematic_hessian(...)[k]`` (Haviland & Corke 2022; the Robotics Toolbox's
     ``jacobm``); unlike that formula, the autodiff gradient stays finite at singularities.
+    Non-finite ``q`` or ``point`` (module doc): raises eagerly; NaN under a trace.
     """
     fn = "jk.manipulability_gradient"
     check_reference(reference)
@@ -285,13 +342,14 @@ def manipulability_gradient(
     f = robot.frame_index(frame)
     pt = check_point(point, q.dtype, fn)
     # Validate rows eagerly (shape 6).
-    _row_indices(rows, 6, fn)
+    idx = _row_indices(rows, 6, fn)
+    guard = finite_guard(fn, q=q, point=pt)
 
     def m(qq):
         J = jacobian_pass(robot, qq, f, pt, reference).matrix()
-        return manipulability(J, measure=measure, rows=rows)
+        return _manipulability(J if idx is None else J[jnp.array(idx)], measure)
 
-    return jax.grad(m)(q)
+    return guard(jax.grad(m)(q))
 
 
 # ----------------------------------------------------------------------------- ellipsoids
@@ -307,10 +365,10 @@ class Ellipsoid(NamedTuple):
     radii: jax.Array
 
 
-def _ellipsoid(J: Any, rows: Any, fn: str) -> tuple[jax.Array, jax.Array]:
-    Jr = _select(J, rows, fn)
+def _ellipsoid(J: Any, rows: Any, fn: str):
+    Jr, guard = _guarded(J, rows, fn)
     U, _, _ = jnp.linalg.svd(jax.lax.stop_gradient(Jr), full_matrices=True)
-    return U, _task_singular_values(Jr)
+    return U, _task_singular_values(Jr), guard
 
 
 def velocity_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
@@ -321,10 +379,10 @@ def velocity_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
     are the translational ones (``"translation"``, m/s per unit joint speed), since an ellipsoid
     mixing metres and radians has no geometric meaning. Radii are differentiable everywhere;
     axes carry no derivative (``stop_gradient``: principal directions are not differentiable where
-    radii coincide).
+    radii coincide). Non-finite ``J`` (module doc): raises eagerly; NaN under a trace.
     """
-    U, s = _ellipsoid(J, rows, "jk.velocity_ellipsoid")
-    return Ellipsoid(axes=U, radii=s)
+    U, s, guard = _ellipsoid(J, rows, "jk.velocity_ellipsoid")
+    return guard(Ellipsoid(axes=U, radii=s))
 
 
 def force_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
@@ -332,12 +390,13 @@ def force_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
 
     Same axes as :func:`velocity_ellipsoid`, radii ``1 / sigma_i``: ``inf`` along a singular
     direction (the structure then holds any force along it with no joint torque). The gradient of
-    an infinite radius is 0 (double-where), never NaN.
+    an infinite radius is 0 (double-where), never NaN. Non-finite ``J`` (module doc): raises
+    eagerly; NaN (not ``inf``) under a trace.
     """
-    U, s = _ellipsoid(J, rows, "jk.force_ellipsoid")
+    U, s, guard = _ellipsoid(J, rows, "jk.force_ellipsoid")
     ok = s > 0
     inv = jnp.where(ok, 1.0 / jnp.where(ok, s, 1.0), jnp.inf)
-    return Ellipsoid(axes=U, radii=inv)
+    return guard(Ellipsoid(axes=U, radii=inv))
 
 
 # ----------------------------------------------------------------------------- statics
@@ -349,16 +408,19 @@ def joint_torques(J: Any, wrench: Any) -> jax.Array:
     in its basis (``world_aligned``: about the frame origin, world axes; ``world``: about the
     world origin). ``tau`` is what the joints must exert for the end effector to apply ``F`` to
     the environment (equivalently, what an external wrench ``-F`` loads them with); power:
-    ``F . (J qd) == tau . qd``.
+    ``F . (J qd) == tau . qd``. Non-finite ``J`` or ``wrench`` (module doc): raises eagerly; NaN
+    under a trace.
     """
-    J = check_J(J, "jk.joint_torques")
+    fn = "jk.joint_torques"
+    J = check_J(J, fn)
     F = jnp.asarray(wrench)
     if F.shape != (J.shape[0],):
         raise ShapeError(
-            f"jk.joint_torques: wrench must have shape ({J.shape[0]},) to match J's rows "
+            f"{fn}: wrench must have shape ({J.shape[0]},) to match J's rows "
             f"([f; n] for a 6-row Jacobian), got {F.shape}. Batch with jax.vmap."
         )
-    return J.T @ F.astype(J.dtype)
+    guard = finite_guard(fn, J=J, wrench=F)
+    return guard(J.T @ F.astype(J.dtype))
 
 
 # ----------------------------------------------------------------------------- spherical wrist
@@ -435,12 +497,14 @@ def wrist_centre(robot: Robot, q: Any, wrist_joints: Sequence[int | str] | None 
 
     ``wrist_joints`` names or indexes the wrist joints (default: the last three). The three axes
     of a spherical wrist meet in one point; two of them are always perpendicular, so the
-    least-squares problem is well posed even at a wrist singularity.
+    least-squares problem is well posed even at a wrist singularity. Non-finite ``q`` (module
+    doc): raises eagerly; NaN under a trace.
     """
     fn = "jk.wrist_centre"
     _, _, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
-    return _wrist_centre(forward_pass(robot, q), wrist_model)
+    guard = finite_guard(fn, q=q)
+    return guard(_wrist_centre(forward_pass(robot, q), wrist_model))
 
 
 def _wrist_centre(fp, wrist_model):
@@ -493,10 +557,14 @@ def wrist_decoupling(
         meet in one point (``axis_distance > 1e-9 * max(1, |c|)``): the robot has no spherical
         wrist and the decoupling does not hold. Under ``jit``/``vmap`` inspect
         ``axis_distance`` and ``coupling`` yourself.
+
+    Non-finite ``q`` or ``threshold`` (module doc): raises eagerly; under a trace the numbers are
+    NaN and both flags True ("possibly singular").
     """
     fn = "jk.wrist_decoupling"
     arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
+    guard = finite_guard(fn, q=q, threshold=threshold)
     J = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned").matrix()
     fp = forward_pass(robot, q)  # joint axes and origins, shared with the wrist centre
     p = fp.p[robot.frame_index(frame)]
@@ -508,17 +576,19 @@ def wrist_decoupling(
     J22 = J[3:, jnp.array(wrist)]
     s11 = jnp.linalg.svd(J11, compute_uv=False)
     s22 = jnp.linalg.svd(J22, compute_uv=False)
-    out = WristDecoupling(
-        det_J=jnp.linalg.det(J),
-        det_arm=jnp.linalg.det(J11),
-        det_wrist=jnp.linalg.det(J22),
-        sigma_min_arm=s11[-1],
-        sigma_min_wrist=s22[-1],
-        arm_singular=s11[-1] < threshold,
-        wrist_singular=s22[-1] < threshold,
-        wrist_centre=c,
-        coupling=jnp.max(jnp.abs(J12)),
-        axis_distance=dist,
+    out = guard(
+        WristDecoupling(
+            det_J=jnp.linalg.det(J),
+            det_arm=jnp.linalg.det(J11),
+            det_wrist=jnp.linalg.det(J22),
+            sigma_min_arm=s11[-1],
+            sigma_min_wrist=s22[-1],
+            arm_singular=s11[-1] < threshold,
+            wrist_singular=s22[-1] < threshold,
+            wrist_centre=c,
+            coupling=jnp.max(jnp.abs(J12)),
+            axis_distance=dist,
+        )
     )
     if check and not is_traced(robot, q):
         d = float(out.axis_distance)

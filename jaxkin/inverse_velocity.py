@@ -23,6 +23,11 @@ Given a Jacobian ``J`` (m, dof) and a task velocity ``v`` (m,) (for the geometri
 The kernels work on one Jacobian and one ``v``; batch with ``jax.vmap``. Values and gradients are
 finite everywhere for ``lambda > 0``; :func:`pinv_velocity` is differentiable where the rank does
 not change (JAX's ``pinv`` rule).
+
+Non-finite input (NaN or inf in ``J``, ``v``, weights, damping, tolerances, configurations or
+path poses) follows the one policy of :mod:`jaxkin.analysis` ("Non-finite input"): eagerly every
+function here raises :class:`~jaxkin.JaxkinError` naming the argument; under ``jit``/``vmap``/
+``grad`` its result (per item under ``vmap``) is NaN.
 """
 
 from __future__ import annotations
@@ -34,7 +39,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import check_J_and_vector, check_q, is_traced, result_dtype, safe_norm
+from ._checks import (
+    check_J_and_vector,
+    check_q,
+    finite_guard,
+    is_traced,
+    result_dtype,
+    safe_norm,
+)
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
@@ -116,13 +128,17 @@ def pinv_velocity(
     there). With ``joint_weights`` ``W_q`` the solution minimises ``qd^T W_q qd`` among the
     ``W_x``-weighted least-squares solutions (``task_weights``); weights are positive vectors or
     SPD matrices. ``v`` is in the Jacobian's reference and row order (``[v; omega]``).
+    Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.pinv_velocity"
     J, v = check_J_and_vector(J, v, fn)
     Wx = _weight_factor(task_weights, J.shape[0], "task_weights", fn, J.dtype)
     Wq = _weight_factor(joint_weights, J.shape[1], "joint_weights", fn, J.dtype)
+    guard = finite_guard(
+        fn, J=J, v=v, rcond=rcond, joint_weights=joint_weights, task_weights=task_weights
+    )
     Jt, vt, back = _apply_weights(J, v, Wx, Wq)
-    return back(jnp.linalg.pinv(Jt, rtol=rcond) @ vt)
+    return guard(back(jnp.linalg.pinv(Jt, rtol=rcond) @ vt))
 
 
 # ----------------------------------------------------------------------------- damped
@@ -162,18 +178,23 @@ def damped_least_squares(
       v: (m,) desired task velocity in J's reference.
       damping: lambda >= 0, scalar.
       joint_weights, task_weights: positive vectors or SPD matrices (see the module doc).
+
+    Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.damped_least_squares"
     J, v = check_J_and_vector(J, v, fn)
     lam = jnp.asarray(damping, dtype=J.dtype)
     if lam.shape != ():
         raise ShapeError(f"{fn}: damping must be a scalar, got shape {lam.shape}.")
-    if not is_traced(lam) and not float(lam) >= 0.0:
-        raise JaxkinError(f"{fn}: damping must be >= 0, got {float(lam)}.")
     Wx = _weight_factor(task_weights, J.shape[0], "task_weights", fn, J.dtype)
     Wq = _weight_factor(joint_weights, J.shape[1], "joint_weights", fn, J.dtype)
+    guard = finite_guard(
+        fn, J=J, v=v, damping=lam, joint_weights=joint_weights, task_weights=task_weights
+    )
+    if not is_traced(lam) and not float(lam) >= 0.0:
+        raise JaxkinError(f"{fn}: damping must be >= 0, got {float(lam)}.")
     Jt, vt, back = _apply_weights(J, v, Wx, Wq)
-    return back(_dls_solve(Jt, vt, lam * lam))
+    return guard(back(_dls_solve(Jt, vt, lam * lam)))
 
 
 def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Array:
@@ -184,11 +205,14 @@ def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Arr
     reaching ``max_damping`` at the singularity. Use it as
     ``damped_least_squares(J, v, damping=adaptive_damping(J, max_damping=0.05, threshold=0.1))``;
     then ``|qd| <= |v| * min(1 / sigma_min, 1 / (2 lambda))`` (exact solution away from
-    singularities, bounded near them).
+    singularities, bounded near them). Non-finite input: module doc (raises eagerly; NaN under a
+    trace).
     """
+    fn = "jk.adaptive_damping"
     J = jnp.asarray(J)
     if J.ndim != 2:
-        raise ShapeError(f"jk.adaptive_damping: J must have shape (m, dof), got {J.shape}.")
+        raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
+    guard = finite_guard(fn, J=J, max_damping=max_damping, threshold=threshold)
     if not threshold > 0 or not max_damping >= 0:
         raise JaxkinError(
             "jk.adaptive_damping: threshold must be > 0 and max_damping >= 0, got "
@@ -200,7 +224,7 @@ def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Arr
     ratio = jnp.minimum(smin / threshold, 1.0)
     lam2 = max_damping**2 * (1.0 - ratio * ratio)
     pos = lam2 > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, lam2, 1.0)), 0.0)
+    return guard(jnp.where(pos, jnp.sqrt(jnp.where(pos, lam2, 1.0)), 0.0))
 
 
 # ----------------------------------------------------------------------------- null space
@@ -226,13 +250,16 @@ def null_space_projector(J: Any, *, rcond: float | None = None, damping: Any = N
 
     ``J^#`` is the pseudo-inverse (``rcond=``, then N is the orthogonal projector onto the null
     space: ``J N = 0``, ``N^2 = N``) or the damped inverse (``damping=``: ``J N = O(lambda^2)``,
-    not exactly a projector, but smooth through singularities). Give exactly one.
+    not exactly a projector, but smooth through singularities). Give exactly one. Non-finite
+    input: module doc (raises eagerly; NaN under a trace).
     """
+    fn = "jk.null_space_projector"
     J = jnp.asarray(J)
     if J.ndim != 2:
-        raise ShapeError(f"jk.null_space_projector: J must have shape (m, dof), got {J.shape}.")
-    Jp = _generalised_inverse(J, rcond, damping, "jk.null_space_projector")
-    return jnp.eye(J.shape[1], dtype=J.dtype) - Jp @ J
+        raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
+    guard = finite_guard(fn, J=J, rcond=rcond, damping=damping)
+    Jp = _generalised_inverse(J, rcond, damping, fn)
+    return guard(jnp.eye(J.shape[1], dtype=J.dtype) - Jp @ J)
 
 
 def null_space_velocity(
@@ -249,6 +276,7 @@ def null_space_velocity(
     :func:`pinv_velocity` (``rcond=``) or :func:`damped_least_squares` (``damping=``); of the
     secondary joint velocity ``qd_secondary`` (dof,) (e.g. ``k * manipulability_gradient`` or a
     joint-limit avoidance gradient) only the part that does not disturb the task is added.
+    Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.null_space_velocity"
     J, v = check_J_and_vector(J, v, fn)
@@ -257,8 +285,9 @@ def null_space_velocity(
         raise ShapeError(
             f"{fn}: qd_secondary must have shape ({J.shape[1]},) (one per joint), got {qd0.shape}."
         )
+    guard = finite_guard(fn, J=J, v=v, qd_secondary=qd0, rcond=rcond, damping=damping)
     Jp = _generalised_inverse(J, rcond, damping, fn)
-    return Jp @ v + qd0 - Jp @ (J @ qd0)
+    return guard(Jp @ v + qd0 - Jp @ (J @ qd0))
 
 
 # ----------------------------------------------------------------------------- resolved rate
@@ -360,6 +389,8 @@ def resolved_rate_control(
       damping, rcond: the inverse used (see :func:`damped_least_squares`, :func:`pinv_velocity`).
 
     Returns a :class:`ResolvedRateResult` with the joint trajectory and the tracking errors.
+    Non-finite input (``q0``, ``T_path``, ``twists``, ``dt``, ``gain``, ``damping``, ``rcond``):
+    module doc (raises eagerly; every field NaN under a trace).
     """
     fn = "jk.resolved_rate_control"
     q0 = check_q(robot, q0, what="q0", fn=fn)
@@ -381,7 +412,10 @@ def resolved_rate_control(
         if Vs.shape != (Ts.shape[0], 6):
             raise ShapeError(f"{fn}: twists must have shape ({Ts.shape[0]}, 6), got {Vs.shape}.")
     f = robot.frame_index(frame)
-    return _resolved_rate(
+    guard = finite_guard(
+        fn, q0=q0, T_path=Ts, twists=Vs, dt=dt, gain=gain, damping=damping, rcond=rcond
+    )
+    out = _resolved_rate(
         robot,
         q0.astype(dtype),
         Ts,
@@ -393,3 +427,4 @@ def resolved_rate_control(
         rcond=None if rcond is None else float(rcond),
         clip_to_limits=clip_to_limits,
     )
+    return guard(out)
