@@ -96,10 +96,9 @@ def finite_guard(fn: str, **inputs: Any) -> FiniteGuard:
             a = np.asarray(x)
             if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
                 raise JaxkinError(
-                    f"{fn}: {name} contains NaN or inf, so no meaningful result exists. Find "
-                    "where it came from (e.g. jax.config.update('jax_debug_nans', True)). Under "
-                    "jit/vmap the result is NaN instead (flags True, counts -1; see 'Non-finite "
-                    "input' in jaxkin.analysis)."
+                    f"{fn}: {name} contains NaN or inf, so no meaningful result exists (see "
+                    "'Non-finite input' in jaxkin.analysis). Find where it came from, e.g. with "
+                    "jax.config.update('jax_debug_nans', True)."
                 )
         return FiniteGuard(False)
     arrays = [jnp.asarray(x) for x in inputs.values()]

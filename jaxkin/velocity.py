@@ -11,7 +11,15 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._checks import check_point, check_q, check_reference, check_twist, result_dtype
+from ._checks import (
+    check_point,
+    check_q,
+    check_reference,
+    check_twist,
+    finite_guard,
+    is_traced,
+    result_dtype,
+)
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
 from .model import Robot
@@ -57,6 +65,17 @@ def point_velocity(
     return twist(robot, q, qd, frame=frame, point=point)[:3]
 
 
+def _host_side(fn: str, **inputs: Any) -> None:
+    """The non-finite policy (:mod:`jaxkin.analysis`) for a host-side result: it cannot be
+    poisoned, so a traced input raises too."""
+    if is_traced(*inputs.values()):
+        raise JaxkinError(
+            f"{fn} returns a Python string, so it works on concrete values only: call it outside "
+            "jit/vmap/grad (e.g. on jax.device_get of the traced result)."
+        )
+    finite_guard(fn, **inputs)
+
+
 def classify_twist(V: Any, tol: float = 1e-9) -> str:
     """Classify an instantaneous rigid-body motion given by its twist ``[v; omega]`` at a point.
 
@@ -67,9 +86,14 @@ def classify_twist(V: Any, tol: float = 1e-9) -> str:
     * ``"general"``: omega != 0 and v . omega != 0 (a screw motion: no point is at rest).
 
     ``tol`` is absolute on |omega| and |v| and relative on the pitch ``|v . omega| / |omega|^2``.
-    Host-side: returns a Python string, so call it outside ``jit``.
+    Host-side: returns a Python string, so it raises :class:`~jaxkin.JaxkinError` under
+    ``jit``/``vmap``/``grad``, and for a non-finite ``V`` or ``tol`` (the non-finite policy of
+    :mod:`jaxkin.analysis`: a string cannot be NaN).
     """
-    V = np.asarray(check_twist(V, "jk.classify_twist"), dtype=float)
+    fn = "jk.classify_twist"
+    V = check_twist(V, fn)
+    _host_side(fn, V=V, tol=tol)
+    V = np.asarray(V, dtype=float)
     v, w = V[:3], V[3:]
     nw, nv = np.linalg.norm(w), np.linalg.norm(v)
     if nw <= tol:
@@ -92,13 +116,15 @@ def classify_motion(Ts: Any, tol: float = 1e-9) -> str:
 
     The fixed point ``c`` solves ``R_k c + p_k = w`` for all k in least squares (unknowns: ``c``
     in body axes, ``w`` in world axes); the motion is a pure rotation when the residual is within
-    ``tol * (1 + max |p|)``.
+    ``tol * (1 + max |p|)``. Host-side, like :func:`classify_twist`: raises
+    :class:`~jaxkin.JaxkinError` under ``jit``/``vmap``/``grad`` and for a non-finite ``Ts`` or
+    ``tol``.
     """
+    fn = "jk.classify_motion"
+    _host_side(fn, Ts=Ts, tol=tol)
     Ts = np.asarray(Ts, dtype=float)
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
-        raise ShapeError(f"Ts must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
-    if not np.all(np.isfinite(Ts)):
-        raise JaxkinError("Ts contains non-finite values.")
+        raise ShapeError(f"{fn}: Ts must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
     R, p = Ts[:, :3, :3], Ts[:, :3, 3]
     scale = 1.0 + float(np.max(np.abs(p)))
     same_R = np.max(np.abs(R - R[0])) <= tol
