@@ -73,6 +73,21 @@ def from_dh(
       dtype: float32 or float64 (default: JAX's default float).
 
     Frames are ``"base"``, ``"link1"`` ... ``"linkN"`` (frame i after joint i) and ``"tool"``.
+
+    >>> import jaxkin as jk
+    >>> robot = jk.Robot.from_dh(
+    ...     [
+    ...         dict(a=1.0, alpha=0.0, d=0.0, theta=0.0, joint="revolute"),
+    ...         dict(a=0.0, alpha=0.0, d=0.0, theta=0.0, joint="prismatic", lower=0.0, upper=1.0),
+    ...     ],
+    ...     convention="standard",
+    ...     name="rp",
+    ... )
+    >>> robot.dof, robot.joint_kinds, robot.frame_names
+    (2, ('revolute', 'prismatic'), ('base', 'link1', 'link2'))
+    >>> T = jk.fk(robot, [0.0, 0.5])  # one unit along x, then 0.5 up the prismatic joint
+    >>> float(T[0, 3]), float(T[2, 3])
+    (1.0, 0.5)
     """
     if convention not in _DH_CONVENTIONS:
         raise ModelError(
@@ -181,6 +196,20 @@ def from_joints(
     ``()`` (default) the last frame; one frame name, that frame; several names, none (the
     robot branches: asking for the default raises, listing these candidates).
     :func:`jaxkin.load_urdf` fills it in.
+
+    >>> import jaxkin as jk
+    >>> robot = jk.Robot.from_joints(
+    ...     [
+    ...         dict(name="shoulder", type="revolute", child="upper_arm", axis=[0, 0, 1]),
+    ...         dict(name="elbow", type="revolute", child="forearm", xyz=[1, 0, 0], axis=[0, 0, 1]),
+    ...         dict(name="flange", type="fixed", child="hand", xyz=[1, 0, 0]),
+    ...     ],
+    ...     name="planar2",
+    ... )
+    >>> robot.joint_names, robot.frame_names
+    (('shoulder', 'elbow'), ('base', 'upper_arm', 'forearm', 'hand'))
+    >>> float(jk.fk(robot, [0.0, 0.0])[0, 3])  # stretched along x: the hand at x = 2
+    2.0
     """
     if isinstance(joints, Mapping) or not isinstance(joints, Sequence) or len(joints) == 0:
         raise ModelError("joints must be a non-empty sequence of mappings, one per joint.")

@@ -84,6 +84,15 @@ def jacobian_dot(
     ``updateFramePlacements`` and ``getFrameJacobianTimeVariation(model, data, frame_id, rf)``
     with ``rf`` LOCAL_WORLD_ALIGNED / LOCAL / WORLD for ``"world_aligned"`` / ``"local"`` /
     ``"world"``.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0])
+    >>> Jd = jk.jacobian_dot(robot, q, qd)
+    >>> Jd.shape
+    (6, 2)
+    >>> bool(jnp.allclose(Jd @ qd, jk.jacobian_dot_qd(robot, q, qd)))
+    True
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot")
 
@@ -107,6 +116,12 @@ def jacobian_dot_qd(
     acceleration of the frame origin or ``point`` in world axes, and angular acceleration) when
     ``qdd = 0``; add ``J @ qdd`` for the full acceleration. Shapes: ``q``, ``qd`` (dof,).
     Computed as one ``jax.jvp`` of the twist ``q -> J(q) @ qd`` (no (6, dof) matrix formed).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0])
+    >>> jk.jacobian_dot_qd(robot, q, qd)[:2].round(6).tolist()  # tip at (1, 1): centripetal
+    [-1.0, -1.0]
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot_qd")
 
@@ -135,6 +150,15 @@ def kinematic_hessian(
     so read it as ``P.reshape(nv, nv, 6)[k, j, :] == H[k, :, j]`` (tests/README.md: "H[k, j, i]");
     the Robotics Toolbox's ``hessian0(q)`` is (n, 6, n) and equals ``H`` for
     ``reference="world_aligned"`` at the tip.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0])
+    >>> H = jk.kinematic_hessian(robot, q)
+    >>> H.shape
+    (2, 6, 2)
+    >>> bool(jnp.allclose(jnp.einsum("k,kij->ij", qd, H), jk.jacobian_dot(robot, q, qd)))
+    True
     """
     q, _, f, pt = _check_call(robot, q, q, frame, point, reference, "jk.kinematic_hessian")
 
@@ -184,6 +208,12 @@ def analytical_jacobian_dot(
     a margin below ``singular_tol`` raises :class:`~jaxkin.RepresentationSingularityError`; under
     ``jit``/``vmap`` the result is all NaN there; ``return_margin=True`` returns
     ``(Jdot_a, margin)`` unmasked.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("puma560")
+    >>> q, qd = jnp.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6]), jnp.ones(6)
+    >>> jk.analytical_jacobian_dot(robot, q, qd, "zyz").shape
+    (6, 6)
     """
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot"

@@ -121,6 +121,14 @@ def geometric_jacobian(
       point: optional offset (3,) of the point of interest from the frame origin, in the frame's
         own axes; the linear rows then give that point's velocity.
       reference: ``"world_aligned"`` (default), ``"local"`` or ``"world"``; see the module doc.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> J.shape
+    (6, 2)
+    >>> J[0].round(6).tolist(), J[5].round(6).tolist()  # v_x and omega_z rows
+    ([-1.0, -1.0], [1.0, 1.0])
     """
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.geometric_jacobian")
     return jacobian_pass(robot, q, f, pt, reference).matrix()
@@ -316,12 +324,25 @@ def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") ->
 
     Linear rows are d(point)/dq; angular rows are ``vee(dR/dq_k R^T)``. Independent of the
     hand-built Table 4.1 assembly, so the two check each other.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("puma560")
+    >>> q = jnp.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    >>> bool(jnp.allclose(jk.jacobian_fwd(robot, q), jk.geometric_jacobian(robot, q)))
+    True
     """
     return _autodiff_jacobian(robot, q, frame, point, reference, "fwd", "jk.jacobian_fwd")
 
 
 def jacobian_rev(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
-    """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, dof)."""
+    """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, dof).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("puma560")
+    >>> q = jnp.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    >>> bool(jnp.allclose(jk.jacobian_rev(robot, q), jk.geometric_jacobian(robot, q)))
+    True
+    """
     return _autodiff_jacobian(robot, q, frame, point, reference, "rev", "jk.jacobian_rev")
 
 
@@ -361,6 +382,14 @@ def analytical_jacobian(
     * under ``jit``/``vmap`` (where values cannot raise), the Jacobian of such a configuration is
       all NaN, so it can never pass for a number; pass ``return_margin=True`` to get
       ``(J_a, margin)`` instead, unmasked, and filter yourself.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> Ja = jk.analytical_jacobian(robot, jnp.array([0.0, jnp.pi / 2]), "rpy")
+    >>> Ja.shape
+    (6, 2)
+    >>> Ja[5].round(6).tolist()  # d(yaw)/dq: a planar arm's yaw is q1 + q2
+    [1.0, 1.0]
     """
     check_representation(representation)
     if method not in ("chain", "jacfwd"):

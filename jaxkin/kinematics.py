@@ -268,7 +268,17 @@ def frame_pose(robot: Robot, q: jax.Array, frame: int) -> tuple[jax.Array, jax.A
 
 def fk_all(robot: Robot, q: Any) -> jax.Array:
     """Poses ``T_world_frame`` of every frame, shape (n_frames, 4, 4), in ``robot.frame_names``
-    order (base first, tool last when present)."""
+    order (base first, tool last when present).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q = jnp.array([0.0, jnp.pi / 2])
+    >>> Ts = jk.fk_all(robot, q)
+    >>> Ts.shape, robot.frame_names
+    ((3, 4, 4), ('base', 'link1', 'link2'))
+    >>> bool(jnp.allclose(Ts[-1], jk.fk(robot, q)))  # the last frame is the tip
+    True
+    """
     q = check_q(robot, q, fn="jk.fk_all")
     if uses_scan(robot):
         fp = scan_pass(robot, q)
@@ -278,7 +288,16 @@ def fk_all(robot: Robot, q: Any) -> jax.Array:
 
 
 def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
-    """Pose ``T_world_frame`` of one frame (default: the tip, tool included), shape (4, 4)."""
+    """Pose ``T_world_frame`` of one frame (default: the tip, tool included), shape (4, 4).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")  # two unit links in the xy plane
+    >>> T = jk.fk(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> T.shape
+    (4, 4)
+    >>> T[:2, 3].round(6).tolist()  # the tip: link 1 along x, then link 2 along y
+    [1.0, 1.0]
+    """
     q = check_q(robot, q, fn="jk.fk")
     f = robot.frame_index(frame)
     if uses_scan(robot):

@@ -47,6 +47,17 @@ def twist(
 
     ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``. Computed column by
     column from the same forward pass as :func:`~jaxkin.geometric_jacobian`, without forming J.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0])  # joint 1 at 1 rad/s
+    >>> V = jk.twist(robot, q, qd)
+    >>> V.shape
+    (6,)
+    >>> V[:2].round(6).tolist(), float(V[5])  # (v_x, v_y) of the tip at (1, 1), omega_z
+    ([-1.0, 1.0], 1.0)
+    >>> bool(jnp.allclose(V, jk.geometric_jacobian(robot, q) @ qd))
+    True
     """
     hint = "jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(qs, qds)"
     q = check_q(robot, q, fn="jk.twist", batch_hint=hint)
@@ -61,7 +72,15 @@ def point_velocity(
     robot: Robot, q: Any, qd: Any, point: Any, frame: int | str | None = None
 ) -> jax.Array:
     """Velocity (3,) in world axes of a point fixed to ``frame``, given as an offset (3,) from the
-    frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``."""
+    frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0])
+    >>> v = jk.point_velocity(robot, q, qd, point=[0.1, 0.0, 0.0])  # 0.1 past the tip, at (1, 1.1)
+    >>> bool(jnp.allclose(v, jnp.array([-1.1, 1.0, 0.0])))
+    True
+    """
     return twist(robot, q, qd, frame=frame, point=point)[:3]
 
 
