@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import ModelError
 
-__all__ = ["JOINT_KINDS", "PARAMETERISATIONS", "Params", "Robot"]
+__all__ = ["JOINT_KINDS", "PARAMETERISATIONS", "NoDefaultFrameError", "Params", "Robot"]
 
 JOINT_KINDS = ("revolute", "prismatic", "fixed")
 PARAMETERISATIONS = ("dh_standard", "dh_modified", "placement")
@@ -41,6 +41,20 @@ PARAMETERISATIONS = ("dh_standard", "dh_modified", "placement")
 
 _LEAF = {"leaf": True}  # field metadata: a float-array pytree leaf
 _STRUCTURE = {"leaf": False}  # field metadata: a hashable Python value, part of the structure
+
+
+class NoDefaultFrameError(ModelError):
+    """A function was asked for the robot's default frame (``frame=None``) but the robot has
+    none: its moving joints branch (arm + gripper fingers, a humanoid), so no frame is moved by
+    all of them. ``candidates`` holds the end frames of the branches; pass one as ``frame=``, or
+    load the chain to one with ``jk.load_urdf(path, tip=...)``."""
+
+    def __init__(self, message: str, robot: str = "", candidates: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.robot, self.candidates = robot, tuple(candidates)
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.robot, self.candidates))
 
 
 def _as_leaf(x: Any) -> Any:
@@ -98,7 +112,8 @@ class Robot:
     Attributes (static): ``name``, ``parameterisation``, ``kinds`` (per joint), ``parents`` (per
     joint, index of the parent frame), ``q_index`` (per joint, index into ``q`` or -1 for fixed),
     ``joint_names`` (one per entry of ``q``), ``frame_names`` (``fk_all``'s order, base first),
-    ``has_tool``, ``configurations`` (named joint vectors).
+    ``has_tool``, ``configurations`` (named joint vectors), ``default_frames`` (which frame
+    ``frame=None`` means: see :attr:`tip_frame`).
 
     Attributes (float leaves): ``params`` (read-only mapping of per-joint parameter arrays),
     ``axis`` (n, 3), ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (dof,), ``base``
@@ -128,6 +143,7 @@ class Robot:
     configurations_: tuple[tuple[str, tuple[float, ...]], ...] = dataclasses.field(
         default=(), metadata=_STRUCTURE
     )
+    default_frames: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, Params):
@@ -196,8 +212,61 @@ class Robot:
 
     @property
     def tip_frame(self) -> int:
-        """Index of the default frame: the last one (the tool when present)."""
-        return len(self.frame_names) - 1
+        """Index of the default frame, the one every function uses when ``frame=None``.
+
+        ``default_frames`` decides it: ``()`` means the last frame (the tool when present: DH
+        robots, chains); one name means that frame (a URDF chain's end, e.g. ``tool0``); several
+        names mean the robot has no default frame, because its moving joints branch and no frame
+        is moved by all of them; those names are the end frames of the branches, and asking for
+        the default raises :class:`NoDefaultFrameError` listing them (also while tracing: it is
+        static information).
+        """
+        d = self.default_frames
+        if not d:
+            return len(self.frame_names) - 1
+        if len(d) == 1:
+            return self.frame_names.index(d[0])
+        raise self._no_default_frame()
+
+    def _no_default_frame(self) -> NoDefaultFrameError:
+        cands = list(self.default_frames)
+        shown = cands if len(cands) <= 30 else [*cands[:30], "..."]
+        index = {n: i for i, n in enumerate(self.frame_names)}
+        # Where the branches meet: the deepest frame on every candidate's path from the base.
+        paths = [self._frame_path(index[c]) for c in cands]
+        meet = 0
+        for fs in zip(*paths, strict=False):
+            if any(f != fs[0] for f in fs):
+                break
+            meet = fs[0]
+        moved = any(self.kinds[j] != "fixed" for j in self.ancestors(meet))
+        above = (
+            f" tip={self.frame_names[meet]!r}, where they branch, keeps the part above the "
+            "branches."
+            if moved
+            else ""
+        )
+        first = cands[0]
+        return NoDefaultFrameError(
+            f"robot {self.name!r} has no default frame: its moving joints branch, so no frame is "
+            "moved by all of them (a default frame must be, or its Jacobian would have columns "
+            f"that are zero by construction). Candidate end frames ({len(cands)}): {shown}. "
+            f"Choose one per call with frame=..., e.g. jk.fk(robot, q, frame={first!r}) "
+            "(any name of robot.frame_names works), or load the chain to it, whose end is then "
+            f"the default: jk.load_urdf(path, tip={first!r}) (jk.robots.load(name, tip=...) "
+            f"for an example-robot-data robot).{above}",
+            robot=self.name,
+            candidates=cands,
+        )
+
+    def _frame_path(self, frame: int) -> list[int]:
+        """Frames from the base (0) to ``frame``, both included."""
+        path = [frame]
+        n = self.n_joints
+        while path[-1] > 0:
+            f = path[-1]
+            path.append(n if self.has_tool and f == n + 1 else self.parents[f - 1])
+        return path[::-1]
 
     @property
     def dtype(self) -> np.dtype:
@@ -218,7 +287,8 @@ class Robot:
         return {k: np.asarray(v, dtype=self.dtype) for k, v in self.configurations_}
 
     def frame_index(self, frame: int | str | None) -> int:
-        """Index into ``frame_names`` of a frame given by name, index or ``None`` (the tip)."""
+        """Index into ``frame_names`` of a frame given by name, index or ``None`` (the default
+        frame, :attr:`tip_frame`; raises :class:`NoDefaultFrameError` when the robot has none)."""
         if frame is None:
             return self.tip_frame
         if isinstance(frame, str):
