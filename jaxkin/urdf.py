@@ -37,6 +37,27 @@ What is read, and how
   ``jk.fk(robot, q, frame="panda_hand")`` and ``geometric_jacobian(..., frame=...)`` work for
   every link, with zero columns for joints not on that link's path.
 
+The default frame
+-----------------
+``fk``, ``geometric_jacobian``, ``twist`` ... with ``frame=None`` use the robot's default frame
+(:attr:`jaxkin.Robot.tip_frame`). It is never a frame that some moving joint of the loaded
+robot does not move (mimic joints included), so no column of its Jacobian is zero by
+construction:
+
+* ``tip=`` given: the tip.
+* The moving joints form one chain (each lies on the path from the root to the last one): the
+  end of that chain. From the child link of the last moving joint, fixed joints are followed
+  down while the link has exactly one child joint; the link where that stops is the default.
+  So a single ``tool0``/``ee_link``/TCP frame fixed to the flange is taken, and where the
+  flange carries several fixed frames (UR files: ``ee_link`` and ``tool0`` both on
+  ``wrist_3_link``) the flange link itself is (pass ``frame=``/``tip=`` for one of them).
+* The moving joints branch (an arm with gripper fingers, a humanoid, a legged robot): there is
+  no default. Loading succeeds (``fk_all`` and every function given ``frame=`` work), but a
+  function asked for the default frame raises :class:`jaxkin.model.NoDefaultFrameError` (a
+  :class:`jaxkin.ModelError`), eagerly and while tracing, listing the candidate end frames (the
+  end of each branch, found as above) and how to choose: ``frame="..."`` per call, or
+  ``load_urdf(path, tip="...")``.
+
 Safety
 ------
 The XML is parsed by expat with handlers that refuse any document type declaration (DOCTYPE),
@@ -945,8 +966,9 @@ def load_urdf(
     Returns:
       A robot whose ``frame_names`` are the selected links (``base`` first, then depth-first,
       siblings in file order), whose ``joint_names`` are the independent joints (``q`` order) and
-      whose limits are the URDF's (continuous joints unbounded). Without ``tip`` the default
-      frame is the last link in depth-first order: pass ``frame=`` explicitly for a tree.
+      whose limits are the URDF's (continuous joints unbounded). The default frame (``frame=None``)
+      is ``tip``; without ``tip``, the end of the chain of moving joints, or none when they
+      branch (then functions need ``frame=``): see "The default frame" in the module doc.
 
     Raises:
       URDFError: invalid or refused file (a :class:`jaxkin.ModelError`), with file, line,
@@ -981,12 +1003,41 @@ def load_urdf(
     leaders = [s for s in leaders if s["name"] in follows]
     try:
         return Robot.from_joints(
-            specs, root=root, name=name or model.name, dtype=dtype, leaders=leaders
+            specs,
+            root=root,
+            name=name or model.name,
+            dtype=dtype,
+            leaders=leaders,
+            default_frames=_default_frames(root, joints),
         )
     except URDFError:
         raise
     except ModelError as e:  # pragma: no cover - the parser validates everything first
         raise ctx.error(f"invalid model: {e}") from None
+
+
+def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
+    """The default frame of the robot made of ``joints`` (parents first, below ``root``), as
+    ``(link,)``, or the candidate end frames when its moving joints branch (see "The default
+    frame" in the module doc). Iterative and linear."""
+    children: dict[str, list[URDFJoint]] = {root: []}
+    for j in joints:
+        children.setdefault(j.parent, []).append(j)
+        children.setdefault(j.child, [])
+    moving_below = dict.fromkeys(children, False)  # a moving joint in the link's subtree
+    for j in reversed(joints):  # children before parents
+        if j.type in MOVING_TYPES or moving_below[j.child]:
+            moving_below[j.parent] = True
+    ends = [j for j in joints if j.type in MOVING_TYPES and not moving_below[j.child]]
+
+    def end_frame(link: str) -> str:
+        while len(children[link]) == 1:  # fixed joints only: no moving joint is below
+            link = children[link][0].child
+        return link
+
+    if not ends:  # no moving joint: refused by load_urdf before this is asked
+        return ()
+    return tuple(end_frame(j.child) for j in ends)
 
 
 def _joint_spec(j: URDFJoint) -> dict[str, Any]:
