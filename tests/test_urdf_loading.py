@@ -622,7 +622,10 @@ def test_erd_names_do_not_shadow_the_zoo():
     assert jk.robots.load("panda").parameterisation == "dh_modified"  # still the zoo's
     robot = jk.robots.load("erd/panda", dtype=np.float64)
     assert robot.parameterisation == "placement" and robot.name == "erd/panda"
-    assert robot.dof == 8 and robot.joint_names[-1] == "panda_finger_joint1"
+    # the zoo loads the arm to its TCP (the default frame); the whole file has the finger too
+    assert robot.dof == 7 and robot.frame_names[robot.tip_frame] == "panda_hand_tcp"
+    whole = jk.load_urdf(erd.path("erd/panda"), dtype=np.float64)
+    assert whole.dof == 8 and whole.joint_names[-1] == "panda_finger_joint1"
     entry = jk.robots.info("erd/panda")
     assert entry.source.startswith(str(erd.path("erd/panda")))
     assert "example-robot-data" in entry.description

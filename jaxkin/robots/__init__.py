@@ -10,7 +10,9 @@ configurations (``robot.configurations``).
 
 When ``example-robot-data`` is installed, its URDFs load by ``"erd/..."`` names as well
 (``load("erd/panda", tip=..., base=...)``); ``erd_names()`` lists them (they are not in
-``names()``, which is the zoo). See :mod:`jaxkin.robots.example_robot_data`.
+``names()``, which is the zoo). Well-known arms load as the chain to their standard tool frame
+(``erd/panda``: ``panda_hand_tcp``, 7 dof; ``erd/ur5_robot``: ``tool0``), the default frame;
+see :mod:`jaxkin.robots.example_robot_data`.
 """
 
 from __future__ import annotations
@@ -99,5 +101,6 @@ def load(name: str, dtype: Any = None, **params: Any) -> Robot:
 
 # Entries register themselves on import.
 from . import chapter as chapter  # noqa: E402
+from . import example_robot_data as example_robot_data  # noqa: E402
 from . import industrial as industrial  # noqa: E402
 from . import niryo_one as niryo_one  # noqa: E402

@@ -23,6 +23,36 @@ and lists the other files of the same package (``ur3.urdf`` of 6.0 is an empty x
 use ``"erd/ur3_robot"``; ``quadrotor_base`` and ``iris_simple`` have no moving joint;
 ``alex_psyonic_hands`` has mimic joints whose leader does not exist).
 
+Default frames
+--------------
+``jk.robots.load("erd/...")`` without ``tip=`` loads the well-known arms as the chain to their
+standard tool frame (:data:`TOOL_FRAMES`), which is then the default frame of ``fk``,
+``geometric_jacobian`` and the rest; gripper joints, which do not move that frame, are not
+entries of ``q``:
+
+* ``erd/panda``, ``erd/panda_collision``: ``panda_hand_tcp`` (the Franka Hand's TCP), or
+  ``panda_hand`` in a file without it; 7 dof, the finger joints left out.
+* ``erd/ur3_robot``, ``erd/ur5_robot``, ``erd/ur10_robot``, their ``_joint_limited_robot``
+  variants, ``erd/ur3_gripper``, ``erd/ur5_gripper``: ``tool0`` (the ROS-Industrial tool
+  flange); 6 dof.
+* ``erd/kinova``: ``j2s6s200_end_effector`` (Kinova's end-effector frame, 0.16 m past link 6,
+  not the fixed finger links); 6 dof.
+* ``erd/xarm7``: ``link_eef``; 7 dof.
+* ``erd/z1``: ``link06`` (the flange; the gripper joint is left out); 6 dof.
+* ``erd/so100``: ``gripper`` (the wrist-roll link that carries the fixed jaw; the moving jaw's
+  joint is left out); 5 dof.
+* ``erd/so101``: ``gripper_frame_link`` (the file's gripper frame); 5 dof.
+* ``erd/talos_left_arm``: ``wrist_left_ft_tool_link`` (the tool side of the wrist force
+  sensor, where the gripper mounts; the gripper joint is left out); 6 dof.
+
+example-robot-data 6.0 ships no KUKA iiwa (``tests/data/kuka_iiwa14.urdf`` stands in for it in
+the tests; loaded with :func:`jaxkin.load_urdf` it defaults to ``lbr_iiwa_link_7``, its flange).
+Every other file gets :func:`jaxkin.load_urdf`'s default: the end of the chain of moving joints,
+or, when they branch (humanoids, legged robots, mobile manipulators, hands), no default frame:
+functions then need ``frame=`` and say so, listing the candidate end frames. Pass ``tip=`` to
+choose another chain; load the whole file, fingers included, with
+``jk.load_urdf(jk.robots.example_robot_data.path("erd/panda"))``.
+
 Set ``JAXKIN_EXAMPLE_ROBOT_DATA`` to a ``robots`` folder to use another copy (e.g. a source
 checkout).
 """
@@ -38,12 +68,34 @@ from typing import Any
 from ..errors import UnknownRobotError
 from ..model import Robot
 
-__all__ = ["PREFIX", "entry", "load", "names", "path", "robots_dir"]
+__all__ = ["PREFIX", "TOOL_FRAMES", "entry", "load", "names", "path", "robots_dir", "tool_frame"]
 
 PREFIX = "erd/"
 ENV = "JAXKIN_EXAMPLE_ROBOT_DATA"
 _DIST = "example-robot-data"
 _MARKER = "example-robot-data/robots/"
+
+_UR = ("tool0",)
+TOOL_FRAMES: dict[str, tuple[str, ...]] = {
+    "erd/panda": ("panda_hand_tcp", "panda_hand"),
+    "erd/panda_collision": ("panda_hand_tcp", "panda_hand"),
+    "erd/ur3_robot": _UR,
+    "erd/ur5_robot": _UR,
+    "erd/ur10_robot": _UR,
+    "erd/ur3_joint_limited_robot": _UR,
+    "erd/ur5_joint_limited_robot": _UR,
+    "erd/ur10_joint_limited_robot": _UR,
+    "erd/ur3_gripper": _UR,
+    "erd/ur5_gripper": _UR,
+    "erd/kinova": ("j2s6s200_end_effector",),
+    "erd/xarm7": ("link_eef",),
+    "erd/z1": ("link06",),
+    "erd/so100": ("gripper",),
+    "erd/so101": ("gripper_frame_link",),
+    "erd/talos_left_arm": ("wrist_left_ft_tool_link",),
+}
+"""The standard tool frame of the well-known arms: the first of these links that the file has
+becomes ``tip`` when :func:`load` is given none (see "Default frames" above)."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -111,12 +163,39 @@ def path(name: str) -> Path:
     )
 
 
+def tool_frame(name: str, base: str | None = None) -> str | None:
+    """The standard tool frame of ``name`` (:data:`TOOL_FRAMES`) that its file has (below
+    ``base`` when given), or None."""
+    from ..urdf import parse_urdf
+
+    if name not in TOOL_FRAMES:
+        return None
+    model = parse_urdf(path(name))
+    parent = {j.child: j.parent for j in model.joints}
+    for link in TOOL_FRAMES[name]:
+        if link not in parent and link != model.root:
+            continue
+        up = link
+        while base is not None and up != base and up in parent:
+            up = parent[up]
+        if base is None or up == base:
+            return link
+    return None
+
+
 def load(name: str, dtype: Any = None, tip: str | None = None, base: str | None = None) -> Robot:
     """Load the example-robot-data robot ``name`` (see :func:`names`) with
-    :func:`jaxkin.load_urdf` (``tip``/``base`` select a chain or subtree)."""
+    :func:`jaxkin.load_urdf` (``tip``/``base`` select a chain or subtree). Without ``tip``, a
+    well-known arm is loaded as the chain to its standard tool frame (:data:`TOOL_FRAMES`, e.g.
+    ``panda_hand_tcp``, ``tool0``), its default frame."""
     from ..urdf import URDFError, load_urdf
 
     p = path(name)
+    if tip is None:
+        try:
+            tip = tool_frame(name, base)
+        except URDFError:
+            pass  # an unloadable file: load_urdf below says why
     try:
         return load_urdf(p, tip=tip, base=base, dtype=dtype, name=name)
     except URDFError as e:
