@@ -21,6 +21,11 @@ transform's own axes: ``T' = T Trans(dp) exp(skew(dw))``), each either all of it
 or some (a mapping name -> boolean mask of the leaf's shape, True = free). Not every set can be
 recovered from end-effector poses: before fitting, :func:`identifiability` checks the
 regressor's rank and names the parameter combinations the data cannot tell apart.
+
+Data are refused eagerly (:class:`~jaxkin.JaxkinError` naming the argument) when ``qs`` or
+``Ts_measured`` hold NaN or inf, when a measured pose is not a rigid transform (e.g. transposed),
+or when there are no measurements. Under ``jit``/``vmap`` (traced data) the non-finite policy of
+:mod:`jaxkin.analysis` applies: the fitted values are NaN and ``converged`` is False.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import is_traced
+from ._checks import check_poses, finite_guard, is_traced
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .kinematics import forward_pass
@@ -54,9 +59,18 @@ class CalibrationResult(NamedTuple):
     transform); ``std``: dict of predicted standard deviations of the free entries (same shapes,
     0 for fixed entries; for base/tool the 6-vector ``[dp; dw]``), from the Gauss-Newton
     covariance ``s^2 (A^T A)^-1`` of the weighted residuals at the solution; ``loss_history``
-    (max_steps,) with NaN after the last step; ``steps``; ``converged``;
-    ``rms_position_before``/``_after`` (m) and ``rms_orientation_before``/``_after`` (rad): root
-    mean square pose errors over the measurements, with the initial and the fitted model.
+    (max_steps,) with NaN after the last step; ``steps``; ``rms_position_before``/``_after`` (m)
+    and ``rms_orientation_before``/``_after`` (rad): root mean square pose errors over the
+    measurements, with the initial and the fitted model.
+
+    Status: ``converged`` (bool scalar) is True only when the loss stopped changing (relative
+    ``tol``) while the loss and the fitted parameters were finite; it is False when the loss
+    became NaN or inf, when ``max_steps`` ran out first, and under a trace for non-finite data.
+    ``identifiable`` (bool scalar) is True when :func:`identifiability` found every free
+    parameter determined by the data; False when it did not (``check_identifiable=False`` fits
+    anyway: the fit then wanders along the undetermined directions, whatever ``converged`` says)
+    and under a trace, where that host-side check cannot run (check once outside). Trust the fit
+    when both are True.
     """
 
     robot: Robot
@@ -69,6 +83,7 @@ class CalibrationResult(NamedTuple):
     rms_position_after: jax.Array
     rms_orientation_before: jax.Array
     rms_orientation_after: jax.Array
+    identifiable: jax.Array
 
 
 class Identifiability(NamedTuple):
@@ -190,20 +205,32 @@ def _residuals_impl(robot, qs, Ts, theta, wp, wo, *, masks_key, f):
 _residuals = robot_jit(_residuals_impl, ("masks_key", "f"))
 
 
-def _check_data(robot: Robot, qs: Any, Ts: Any, fn: str):
+def _check_qs(robot: Robot, qs: Any, fn: str):
+    """Configurations (M, dof), M >= 1, as the robot's dtype, and their non-finite guard."""
     qs = jnp.asarray(qs)
-    Ts = jnp.asarray(Ts)
     if qs.ndim != 2 or qs.shape[1] != robot.dof:
         raise ShapeError(f"{fn}: qs must have shape (M, {robot.dof}), got {qs.shape}.")
-    if Ts.shape != (qs.shape[0], 4, 4):
+    if qs.shape[0] == 0:
+        raise JaxkinError(
+            f"{fn}: no measurements (qs has 0 rows): give at least one configuration and its "
+            "measured pose (enough of them to determine the free parameters)."
+        )
+    guard = finite_guard(fn, qs=qs)
+    return qs.astype(robot.dtype), guard
+
+
+def _check_data(robot: Robot, qs: Any, Ts: Any, fn: str):
+    """Checked ``qs`` (M, dof) and ``Ts`` (M, 4, 4) (finite and rigid when concrete), and the
+    non-finite guard of ``qs``."""
+    qs, _ = _check_qs(robot, qs, fn)
+    shape = tuple(Ts.shape) if hasattr(Ts, "shape") else np.shape(Ts)
+    if len(shape) == 3 and shape[1:] == (4, 4) and shape[0] != qs.shape[0]:
         raise ShapeError(
             f"{fn}: Ts_measured must have shape ({qs.shape[0]}, 4, 4) (one pose per row of qs), "
-            f"got {Ts.shape}."
+            f"got {shape}."
         )
-    if not is_traced(qs, Ts) and not (np.all(np.isfinite(qs)) and np.all(np.isfinite(Ts))):
-        raise JaxkinError(f"{fn}: qs and Ts_measured must be finite.")
-    dtype = robot.dtype
-    return qs.astype(dtype), Ts.astype(dtype)
+    Ts, _ = check_poses(Ts, fn, "Ts_measured", robot.dtype, batch="required")
+    return qs, Ts, finite_guard(fn, qs=qs, Ts_measured=Ts)
 
 
 # ----------------------------------------------------------------------------- identifiability
@@ -254,7 +281,8 @@ def identifiability(
     order of ``names``, a parameter is *unidentifiable* when its column lies (to ``rtol``) in the
     span of the columns before it: e.g. two offsets along one joint axis, a joint zero offset and
     a rotation about the same axis, or a parameter no measured pose depends on.
-    Host-side helper (numpy arrays and Python lists).
+    Host-side helper (numpy arrays and Python lists): raises :class:`~jaxkin.JaxkinError` under a
+    trace, for non-finite ``qs`` and for no ``qs`` at all.
     """
     masks = _masks(robot, params)
     f = robot.frame_index(frame)
@@ -264,12 +292,7 @@ def identifiability(
             "jit/vmap/grad. jk.calibrate calls it unless check_identifiable=False; inside a "
             "transformation pass check_identifiable=False and check once outside."
         )
-    qs = jnp.asarray(qs)
-    if qs.ndim != 2 or qs.shape[1] != robot.dof:
-        raise ShapeError(
-            f"jk.identifiability: qs must have shape (M, {robot.dof}), got {qs.shape}."
-        )
-    qs = qs.astype(robot.dtype)
+    qs, _ = _check_qs(robot, qs, "jk.identifiability")
     names = _names(masks)
     A = _regressor(
         robot,
@@ -322,18 +345,19 @@ def _fit_impl(robot, qs, Ts, wp, wo, tol, *, masks_key, f, optimizer, max_steps)
     history0 = jnp.full((max_steps,), jnp.nan, dtype)
 
     def cond(c):
-        _, _, k, _, _, done = c
-        return (k < max_steps) & ~done
+        _, _, k, _, _, met, finite = c
+        return (k < max_steps) & ~met & finite
 
     def body(c):
-        theta, state, k, hist, v_prev, _ = c
+        theta, state, k, hist, v_prev, _, _ = c
         v, g = vg(theta)
         hist = hist.at[jnp.maximum(k - 1, 0)].set(jnp.where(k > 0, v, hist[0]))
         updates, state = optimizer.update(g, state, theta, value=v, grad=g, value_fn=loss)
         theta = optax.apply_updates(theta, updates)
-        # Converged: the loss stopped changing (relative tol).
-        done = (jnp.abs(v_prev - v) <= tol * jnp.maximum(v, 1e-300)) | ~jnp.isfinite(v)
-        return theta, state, k + 1, hist, v, done
+        # Converged: the loss stopped changing (relative tol). A NaN or inf loss stops the loop
+        # without converging.
+        met = jnp.abs(v_prev - v) <= tol * jnp.maximum(v, 1e-300)
+        return theta, state, k + 1, hist, v, met, jnp.isfinite(v)
 
     init = (
         theta0,
@@ -342,9 +366,11 @@ def _fit_impl(robot, qs, Ts, wp, wo, tol, *, masks_key, f, optimizer, max_steps)
         history0,
         jnp.asarray(jnp.inf, dtype),
         jnp.asarray(False),
+        jnp.asarray(True),
     )
-    theta, _, k, hist, _, done = jax.lax.while_loop(cond, body, init)
-    return theta, hist, k, done
+    theta, _, k, hist, _, met, finite = jax.lax.while_loop(cond, body, init)
+    converged = met & finite & jnp.all(jnp.isfinite(theta))
+    return theta, hist, k, converged
 
 
 _fit = robot_jit(_fit_impl, ("masks_key", "f", "optimizer", "max_steps"))
@@ -380,21 +406,26 @@ def calibrate(
       tol: stop when the loss changes by less than ``tol`` relative to its value.
       check_identifiable: first check (:func:`identifiability`) that the data determine every
         free parameter, and raise :class:`~jaxkin.JaxkinError` naming the combinations that
-        they do not (a fit would wander along them).
+        they do not (a fit would wander along them). With False the fit runs anyway and the
+        result's ``identifiable`` field reports the check (False under a trace: not checked).
 
-    Returns a :class:`CalibrationResult`.
+    Returns a :class:`CalibrationResult`; check its ``converged`` and ``identifiable``.
+    Non-finite, non-rigid or no measurements: see the module doc.
     """
     fn = "jk.calibrate"
     if not isinstance(robot, Robot):
         raise ShapeError(f"{fn} expects a jaxkin Robot, got {type(robot).__name__}.")
     masks = _masks(robot, params)
     f = robot.frame_index(frame)
-    qs, Ts = _check_data(robot, qs, Ts_measured, fn)
+    qs, Ts, guard = _check_data(robot, qs, Ts_measured, fn)
     if not (position_sigma > 0 and orientation_sigma > 0):
         raise JaxkinError(f"{fn}: position_sigma and orientation_sigma must be > 0.")
+    if not tol >= 0:
+        raise JaxkinError(f"{fn}: tol must be a number >= 0, got {tol!r}.")
     if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
         raise JaxkinError(f"{fn}: max_steps must be an integer >= 1, got {max_steps!r}.")
-    if check_identifiable:
+    identifiable = False  # under a trace: not checked
+    if check_identifiable or not is_traced(robot, qs):
         ident = identifiability(
             robot,
             qs,
@@ -403,7 +434,8 @@ def calibrate(
             position_sigma=position_sigma,
             orientation_sigma=orientation_sigma,
         )
-        if ident.unidentifiable:
+        identifiable = not ident.unidentifiable
+        if check_identifiable and ident.unidentifiable:
             raise JaxkinError(
                 f"{fn}: the measurements cannot determine all of the {len(ident.names)} free "
                 f"parameters (regressor rank {ident.rank}): {ident.unidentifiable} only move the "
@@ -417,7 +449,7 @@ def calibrate(
     dtype = robot.dtype
     wp = jnp.asarray(1.0 / position_sigma, dtype)
     wo = jnp.asarray(1.0 / orientation_sigma, dtype)
-    theta, hist, k, done = _fit(
+    theta, hist, k, converged = _fit(
         robot,
         qs,
         Ts,
@@ -429,6 +461,10 @@ def calibrate(
         optimizer=optimizer,
         max_steps=int(max_steps),
     )
+    # Non-finite traced data (module doc): NaN parameters and history, not converged.
+    theta, hist = guard((theta, hist))
+    if guard.bad is not False:
+        converged = converged & ~guard.bad
     one = jnp.ones((), dtype)
 
     def rms(th):
@@ -464,11 +500,12 @@ def calibrate(
         std=stds,
         loss_history=hist,
         steps=k,
-        converged=done,
+        converged=converged,
         rms_position_before=before[0],
         rms_position_after=after[0],
         rms_orientation_before=before[1],
         rms_orientation_after=after[1],
+        identifiable=jnp.asarray(identifiable),
     )
 
 
