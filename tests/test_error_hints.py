@@ -1,0 +1,213 @@
+"""The code an error message suggests works when pasted.
+
+Each public function that takes one configuration ``q`` (or one Jacobian ``J``) is called with a
+batch; the ShapeError it raises suggests code ("... e.g. <code>."). That code is evaluated in a
+namespace holding what a user who made the mistake has: ``jax``, ``jk``, ``robot``, the batches
+``qs``, ``qds`` (5, dof), ``Js`` (5, 6, dof), ``vs`` (5, 6), and the other arguments of the call
+under their parameter names (``point``, ``threshold``, ``wrench``, ...). It must run and return,
+for every row, what the function returns for that row (so a hint that calls another function or
+drops an argument fails).
+
+Hints known to be wrong are marked ``xfail(strict=True)`` with what is wrong, so that the suite
+stays green while they are fixed and the mark must go when they are.
+"""
+
+from __future__ import annotations
+
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxkin as jk
+import jaxkin.testing  # makes jk.testing an attribute
+
+N = 5
+
+
+@pytest.fixture(scope="module")
+def ns():
+    robot = jk.robots.load("puma560")
+    qs = jk.sample_configurations(robot, N, key=0)
+    qds = jax.random.normal(jax.random.key(1), qs.shape, dtype=qs.dtype)
+    Js = jax.vmap(lambda q: jk.geometric_jacobian(robot, q))(qs)
+    vs = jax.random.normal(jax.random.key(2), (N, 6), dtype=qs.dtype)
+    return {
+        "jax": jax,
+        "jk": jk,
+        "robot": robot,
+        "qs": qs,
+        "qds": qds,
+        "Js": Js,
+        "vs": vs,
+        # other arguments of the failing calls, as the user would have named them
+        "point": [0.0, 0.0, 0.1],
+        "threshold": 1e-3,
+        "wrench": vs[0],
+        "rcond": 1e-6,
+        "damping": 0.05,
+        "qd_secondary": qds[0],
+    }
+
+
+def xfail(reason):
+    return pytest.mark.xfail(reason=reason, strict=True)
+
+
+# (failing call, the call for row i). Both are evaluated in the namespace above.
+Q_CASES = [
+    ("jk.fk(robot, qs)", "jk.fk(robot, qs[i])"),
+    ("jk.fk_all(robot, qs)", "jk.fk_all(robot, qs[i])"),
+    ("jk.geometric_jacobian(robot, qs)", "jk.geometric_jacobian(robot, qs[i])"),
+    ("jk.analytical_jacobian(robot, qs)", "jk.analytical_jacobian(robot, qs[i])"),
+    ("jk.jacobian_fwd(robot, qs)", "jk.jacobian_fwd(robot, qs[i])"),
+    ("jk.jacobian_rev(robot, qs)", "jk.jacobian_rev(robot, qs[i])"),
+    pytest.param(
+        "jk.jacobians.frame_jacobian(robot, qs)",
+        "jk.jacobians.frame_jacobian(robot, qs[i])",
+        marks=xfail("hint calls jk.frame_jacobian, which jaxkin does not export"),
+    ),
+    ("jk.twist(robot, qs, qds)", "jk.twist(robot, qs[i], qds[i])"),
+    pytest.param(
+        "jk.point_velocity(robot, qs, qds, point)",
+        "jk.point_velocity(robot, qs[i], qds[i], point)",
+        marks=xfail("hint is jk.twist's: returns (N, 6) twists and drops point"),
+    ),
+    ("jk.jacobian_dot(robot, qs, qds)", "jk.jacobian_dot(robot, qs[i], qds[i])"),
+    ("jk.jacobian_dot_qd(robot, qs, qds)", "jk.jacobian_dot_qd(robot, qs[i], qds[i])"),
+    (
+        "jk.analytical_jacobian_dot(robot, qs, qds)",
+        "jk.analytical_jacobian_dot(robot, qs[i], qds[i])",
+    ),
+    (
+        "jk.analytical_jacobian_dot_qd(robot, qs, qds)",
+        "jk.analytical_jacobian_dot_qd(robot, qs[i], qds[i])",
+    ),
+    pytest.param(
+        "jk.kinematic_hessian(robot, qs)",
+        "jk.kinematic_hessian(robot, qs[i])",
+        marks=xfail("hint passes qd as kinematic_hessian's frame argument"),
+    ),
+    ("jk.manipulability_gradient(robot, qs)", "jk.manipulability_gradient(robot, qs[i])"),
+    ("jk.wrist_centre(robot, qs)", "jk.wrist_centre(robot, qs[i])"),
+    pytest.param(
+        "jk.testing.finite_difference_jacobian(robot, qs)",
+        "jk.testing.finite_difference_jacobian(robot, qs[i])",
+        marks=xfail("hint calls a bare finite_difference_jacobian (NameError)"),
+    ),
+    pytest.param(
+        "jk.wrist_decoupling(robot, qs, threshold)",
+        "jk.wrist_decoupling(robot, qs[i], threshold)",
+        marks=xfail("hint drops the required threshold"),
+    ),
+]
+
+J_CASES = [
+    ("jk.singular_values(Js)", "jk.singular_values(Js[i])"),
+    pytest.param(
+        "jk.analysis.rank(Js)",
+        "jk.analysis.rank(Js[i])",
+        marks=xfail("hint calls jk.rank, which jaxkin does not export (jk.analysis.rank)"),
+    ),
+    ("jk.manipulability(Js)", "jk.manipulability(Js[i])"),
+    ("jk.condition_number(Js)", "jk.condition_number(Js[i])"),
+    pytest.param(
+        "jk.near_singular(Js, threshold)",
+        "jk.near_singular(Js[i], threshold)",
+        marks=xfail("hint drops the required threshold"),
+    ),
+    ("jk.dependent_columns(Js)", "jk.dependent_columns(Js[i])"),
+    ("jk.velocity_ellipsoid(Js)", "jk.velocity_ellipsoid(Js[i])"),
+    ("jk.force_ellipsoid(Js)", "jk.force_ellipsoid(Js[i])"),
+    pytest.param(
+        "jk.joint_torques(Js, wrench)",
+        "jk.joint_torques(Js[i], wrench)",
+        marks=xfail("hint drops the wrench"),
+    ),
+    pytest.param(
+        "jk.pinv_velocity(Js, vs, rcond=rcond)",
+        "jk.pinv_velocity(Js[i], vs[i], rcond=rcond)",
+        marks=xfail("hint drops v and the required rcond"),
+    ),
+    pytest.param(
+        "jk.damped_least_squares(Js, vs, damping=damping)",
+        "jk.damped_least_squares(Js[i], vs[i], damping=damping)",
+        marks=xfail("hint drops v and damping"),
+    ),
+    pytest.param(
+        "jk.adaptive_damping(Js, max_damping=0.05, threshold=threshold)",
+        "jk.adaptive_damping(Js[i], max_damping=0.05, threshold=threshold)",
+        marks=xfail("no hint"),
+    ),
+    pytest.param(
+        "jk.null_space_projector(Js, rcond=rcond)",
+        "jk.null_space_projector(Js[i], rcond=rcond)",
+        marks=xfail("no hint"),
+    ),
+    pytest.param(
+        "jk.null_space_velocity(Js, vs, qd_secondary, rcond=rcond)",
+        "jk.null_space_velocity(Js[i], vs[i], qd_secondary, rcond=rcond)",
+        marks=xfail("hint drops v, qd_secondary and rcond"),
+    ),
+]
+
+_HINT = re.compile(r".*\be\.g\. (.+)\.\s*$", re.DOTALL)
+
+
+def suggested_code(message: str) -> str:
+    """The code after the message's last "e.g. ", up to its final period."""
+    m = _HINT.match(message)
+    assert m, f"no suggested code in: {message}"
+    return m.group(1)
+
+
+def check_hint(ns, call: str, row: str) -> None:
+    with pytest.raises(jk.ShapeError) as info:
+        eval(call, dict(ns))
+    code = suggested_code(str(info.value))
+    try:
+        got = eval(code, dict(ns))
+    except Exception as e:  # the report names the hint and what it raised
+        pytest.fail(f"{call}: the suggested {code!r} raised {type(e).__name__}: {e}")
+    for i in (0, N - 1):
+        want = eval(row, {**ns, "i": i})
+        got_i = jax.tree_util.tree_map(lambda x, i=i: x[i], got)
+        assert jax.tree_util.tree_structure(got_i) == jax.tree_util.tree_structure(want), (
+            f"{call}: the suggested {code!r} returns {jax.tree_util.tree_structure(got)}"
+        )
+        for g, w in zip(
+            jax.tree_util.tree_leaves(got_i), jax.tree_util.tree_leaves(want), strict=True
+        ):
+            assert np.shape(g) == np.shape(w), (
+                f"{call}: the suggested {code!r} gives rows of shape {np.shape(g)}, "
+                f"expected {np.shape(w)}"
+            )
+            np.testing.assert_allclose(
+                np.asarray(g), np.asarray(w), rtol=1e-9, atol=1e-12, equal_nan=True, err_msg=code
+            )
+
+
+def _ids(cases) -> list[str]:
+    return [c.values[0] if hasattr(c, "marks") else c[0] for c in cases]
+
+
+@pytest.mark.parametrize(("call", "row"), Q_CASES, ids=_ids(Q_CASES))
+def test_batch_of_q_hint_runs(ns, call, row):
+    check_hint(ns, call, row)
+
+
+@pytest.mark.parametrize(("call", "row"), J_CASES, ids=_ids(J_CASES))
+def test_batch_of_J_hint_runs(ns, call, row):
+    check_hint(ns, call, row)
+
+
+def test_batched_qd_hint_keeps_qd(ns):
+    """The twist and J-dot hints used to drop ``qd`` (regression: they now vmap over both)."""
+    for fn in ("twist", "jacobian_dot", "jacobian_dot_qd"):
+        with pytest.raises(jk.ShapeError) as info:
+            getattr(jk, fn)(ns["robot"], ns["qs"], ns["qds"])
+        code = suggested_code(str(info.value))
+        assert "qd" in code.split("(qs")[0] and code.endswith("(qs, qds)"), code
+        assert jnp.shape(eval(code, dict(ns)))[0] == N
