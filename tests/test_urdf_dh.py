@@ -2,7 +2,8 @@
 frames coincide.
 
 Panda (zoo ``"panda"``, modified DH, Franka's table; ``"erd/panda"``, franka_description): every DH
-frame is a URDF link frame, the fixed transform between them being the identity:
+frame is a URDF link frame (of the whole file, fingers included: ``jk.load_urdf``), the fixed
+transform between them being the identity:
 ``base = panda_link0``, ``link1..link6 = panda_link1..panda_link6``, ``link7 = panda_link8`` (the
 zoo folds the 0.107 m flange into row 7; ``panda_link7`` is 0.107 m behind it) and
 ``tool = panda_hand_tcp`` (``Tz(0.1034) Rz(-pi/4)`` after the flange). Same q, same limits.
@@ -24,6 +25,7 @@ import pytest
 from _urdf_support import erd_root
 
 import jaxkin as jk
+from jaxkin.robots import example_robot_data as erd
 
 if erd_root() is None:
     pytest.skip("example-robot-data is not installed (test extra)", allow_module_level=True)
@@ -36,6 +38,12 @@ def _configs(robot, n, seed):
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     lo, hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)
     return lo + (hi - lo) * np.random.default_rng(seed).random((n, robot.dof))
+
+
+def whole(name):
+    """The whole file (fingers, ``base``, ``tool0`` and every other link), not the zoo's chain
+    to the tool frame."""
+    return jk.load_urdf(erd.path(name), dtype=np.float64)
 
 
 def _rel(T_base, T):
@@ -52,7 +60,7 @@ PANDA_PAIRS = [
 
 def test_panda_dh_frames_are_urdf_links():
     dh = jk.robots.load("panda", dtype=np.float64)
-    urdf = jk.robots.load("erd/panda", dtype=np.float64)
+    urdf = whole("erd/panda")
     assert urdf.joint_names[:7] == tuple(f"panda_joint{i}" for i in range(1, 8))
     np.testing.assert_array_equal(np.asarray(dh.lower), np.asarray(urdf.lower)[:7])
     np.testing.assert_array_equal(np.asarray(dh.upper), np.asarray(urdf.upper)[:7])
@@ -82,7 +90,7 @@ def test_panda_dh_frames_are_urdf_links():
 
 def test_ur5_dh_base_and_flange_are_urdf_base_and_tool0():
     dh = jk.robots.load("ur5", dtype=np.float64)
-    urdf = jk.robots.load("erd/ur5_robot", dtype=np.float64)
+    urdf = whole("erd/ur5_robot")
     assert urdf.joint_names == (
         "shoulder_pan_joint",
         "shoulder_lift_joint",
@@ -114,7 +122,7 @@ def test_ur5_dh_base_and_flange_are_urdf_base_and_tool0():
 
 def test_ur5_dh_joint_axes_are_the_urdf_joint_axes():
     dh = jk.robots.load("ur5", dtype=np.float64)
-    urdf = jk.robots.load("erd/ur5_robot", dtype=np.float64)
+    urdf = whole("erd/ur5_robot")
     moving = [j for j, k in enumerate(urdf.kinds) if k != "fixed"]
     for q in _configs(dh, 3, 7):
         Ts_dh = np.asarray(jk.fk_all(dh, q))  # base, link1..link6
