@@ -632,6 +632,7 @@ class ResultWriter:
         _check_names([*self.fields, *self.meta], self.format)
         self.n, self.rows, self.tmp = int(n), 0, None
         self._saved: list[tuple[int, Any]] = []
+        self._signal = 0
         if self.format == "csv":
             columns = columns or {k: _default_columns(k, s) for k, (s, _) in self.fields.items()}
             if comments is None:
@@ -681,6 +682,7 @@ class ResultWriter:
     def append(self, rows: Mapping[str, Any]) -> None:
         """Append the next rows: ``rows[name]`` of shape ``(k, *row_shape)`` for every field,
         one ``k`` for all."""
+        self._check_signal()
         if self._file is None:
             raise JaxkinError(f"ResultWriter for {self.path}: append after commit or abort.")
         missing = set(self.fields) - set(rows)
@@ -702,6 +704,7 @@ class ResultWriter:
     def commit(self) -> str:
         """Finish the file and rename it onto ``path`` (replacing a previous file); returns
         ``path``. Every one of the ``n`` rows must have been appended."""
+        self._check_signal()
         if self._file is None:
             raise JaxkinError(f"ResultWriter for {self.path}: commit after commit or abort.")
         if self.rows != self.n:
@@ -757,7 +760,14 @@ class ResultWriter:
         if callable(previous):
             previous(signum, frame)
             return
+        # Python may run this inside a gc or __del__ callback, which swallows exceptions: the
+        # flag makes the next append or commit raise instead.
+        self._signal = signum
         raise SystemExit(128 + signum)
+
+    def _check_signal(self) -> None:
+        if self._signal:
+            raise SystemExit(128 + self._signal)
 
     def __exit__(self, *exc: Any) -> None:
         try:

@@ -3,31 +3,38 @@
 * ``jaxkin robots`` lists the zoo and the example-robot-data URDFs that load by name.
 * ``jaxkin jacobian ROBOT --q ...`` prints the geometric (or analytical) Jacobian of one
   configuration as a labelled table, stating its frame, reference and row order.
-* ``jaxkin velocities [ROBOT] --n N`` samples N configurations and joint velocities (or reads them
-  from a CSV/NPZ file with ``--configurations``) and computes for each the hand-built geometric
-  Jacobian, the autodiff one (``jax.jacfwd``) as a check, the analytical Jacobian with its
-  representation margin, the twist ``J @ qd`` and the singular values of ``J``, in compiled chunks
-  (:func:`jaxkin.batch.chunked_map`); prints a summary and writes an ``.npz`` or ``.csv`` file.
+* ``jaxkin velocities [ROBOT] --n N`` samples N configurations
+  (:func:`jaxkin.sample_configurations`, block by block) and joint velocities (or reads them
+  from a CSV/NPZ file with
+  ``--configurations``) and computes for each, from one forward pass, the hand-built geometric
+  Jacobian, the twist ``J @ qd``, the analytical Jacobian with its representation margin and the
+  singular values of ``J``, in compiled chunks (:func:`jaxkin.batch.chunked_map`), streaming them
+  to an ``.npz`` or ``.csv`` file (:class:`jaxkin.batch.ResultWriter`); the first
+  ``CHECK_ROWS`` configurations are also checked against autodiff (``jax.jacfwd``). Prints a
+  summary.
 
 ROBOT is a zoo name (``jaxkin robots``), an example-robot-data name (``erd/panda``) or the path of
 a URDF file.
 
-Exit codes: 0 success; 1 the hand-built and autodiff Jacobians disagree (FAIL); 2 a usage error
-(one line on stderr starting ``jaxkin: error:``); 130 interrupted.
+Exit codes: 0 success; 1 a check failed (the hand-built and autodiff Jacobians disagree, or a
+result is not finite); 2 a usage error (one line on stderr starting ``jaxkin: error:``); 130
+interrupted (143 on SIGTERM).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import csv
+import io
 import json
 import math
 import os
 import pathlib
 import re
 import sys
-import tempfile
-from collections.abc import Iterator, Sequence
+import zipfile
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import jax
@@ -36,28 +43,41 @@ import numpy as np
 
 import jaxkin as jk
 
-from .batch import ProgressBar, chunked_map
-from .jacobians import REFERENCES
-from .representations import REPRESENTATIONS
+from .batch import MapStats, ProgressBar, ResultWriter, chunked_map
+from .jacobians import REFERENCES, change_reference
+from .representations import (
+    REPRESENTATIONS,
+    analytical_from_geometric,
+    from_matrix,
+    representation_margin,
+)
 
 __all__ = [
+    "SampledRows",
     "format_jacobian",
     "load_robot",
     "main",
     "read_configurations",
-    "sample_configurations",
+    "results_kernel",
+    "sample_rows",
     "velocity_kernel",
 ]
 
 PROGRESS_MIN_N = 200_000
-# Rows per compiled call. Smaller than chunked_map's default: this kernel (three Jacobians and an
+# Rows per compiled call. Smaller than chunked_map's default: this kernel (a Jacobian pass and an
 # SVD per row) has many intermediates, and on a 2-core CPU 4096 rows ran 1.5 - 2x faster than
 # 65536 (their working set stays in cache).
 CLI_CHUNK_SIZE = 4096
 CHECK_TOL = {"float64": 1e-10, "float32": 1e-4}
-# Half-width of the sampling interval on an unbounded side: radians (revolute), metres (prismatic).
-UNBOUNDED_HALF_WIDTH = {"revolute": math.pi, "prismatic": 1.0}
+CHECK_ROWS = 1000  # configurations checked against autodiff (jax.jacfwd)
 DEFAULT_N = 100_000
+SAMPLE_BLOCK = 65536  # rows drawn per random key (fold_in(key, block))
+NORM_SAMPLE = 1 << 24  # twist norms kept for the median and p99 (every k-th row beyond)
+# Caps: beyond them a run would take days, exhaust memory or print nonsense.
+MAX_N = 100_000_000
+MAX_CHUNK = 1 << 20
+MAX_DIGITS = 17  # float64 round-trips with 17 significant digits; more print noise
+MAX_SEED = 2**32 - 1
 URDF_SUFFIXES = (".urdf", ".xml")
 OUTPUT_FORMATS = ("npz", "csv")
 
@@ -80,8 +100,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 # ---------------------------------------------------------------------- argument types
-def _positive_int(text: str) -> int:
-    """A positive integer; ``1_000_000`` and ``1e6`` are accepted."""
+def _integer(text: str, lo: int, hi: int) -> int:
+    """An integer in ``[lo, hi]``; ``1_000_000`` and ``1e6`` are accepted."""
     try:
         value = int(text)
     except ValueError:
@@ -90,20 +110,36 @@ def _positive_int(text: str) -> int:
         except ValueError:
             number = math.nan
         if not (math.isfinite(number) and number.is_integer()):
-            raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         value = int(number)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"expected an integer from {lo} to {hi:,}, got {text!r}")
     return value
 
 
+def _count(text: str) -> int:
+    return _integer(text, 1, MAX_N)
+
+
+def _chunk(text: str) -> int:
+    return _integer(text, 1, MAX_CHUNK)
+
+
+def _digits(text: str) -> int:
+    return _integer(text, 0, MAX_DIGITS)
+
+
 def _seed(text: str) -> int:
+    return _integer(text, 0, MAX_SEED)
+
+
+def _real(text: str) -> float:
     try:
-        value = int(text)
+        value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return value
 
 
@@ -136,10 +172,12 @@ def _frame(text: str) -> int | str:
 # ---------------------------------------------------------------------- parser
 _VELOCITIES_EPILOG = f"""\
 sampling:
-  q is uniform within each joint's limits; an unbounded side is taken as -pi/pi rad for a
-  revolute joint and -1/1 m for a prismatic one (or the finite side -/+ 2 pi rad, 2 m when that
-  would leave an empty interval). qd is uniform in [-s, s] rad/s (revolute) or m/s (prismatic),
-  s = --qd-scale. Both come from numpy's default_rng(--seed).
+  q is uniform within each joint's limits (jaxkin.sample_configurations); an unbounded side
+  (infinite, or |limit| >= 1e6 such as +-1.79e308) is taken as -pi/pi rad for a revolute joint
+  and -1/1 m for a prismatic one (or the finite side -/+ 2 pi rad, 2 m). qd is uniform in
+  [-s, s] rad/s (revolute) or m/s (prismatic), s = --qd-scale. Both are drawn in blocks of
+  {SAMPLE_BLOCK:,} rows, block b from jax.random.fold_in(key(--seed), b): a configuration depends
+  on the seed and its index only, and they never all sit in memory.
 
 near-singularity criteria (tol = --singular-tol):
   kinematic:       sigma_min / sigma_max < tol, the singular values of the 6 x dof geometric
@@ -150,24 +188,35 @@ near-singularity criteria (tol = --singular-tol):
                    representation's singularity: |cos(pitch)| for rpy, |sin(theta)| for zyz,
                    1 - |w| / (2 pi) for rotvec. The analytical Jacobian grows like 1 / margin.
 
-check:
-  max |J_handbuilt - J_jacfwd| over all entries and configurations must be at most
+check (the first {CHECK_ROWS:,} configurations; all run the same hand-built kernel):
+  max |J_handbuilt - J_jacfwd| over all their entries must be at most
   {CHECK_TOL["float64"]:g} (float64) or {CHECK_TOL["float32"]:g} (float32); otherwise FAIL, exit 1.
+  Every result must be finite, and some joint must move the frame (a Jacobian not all zero):
+  otherwise exit 1 (or 2, for the frame, before the run) and no output file.
+
+limits (larger values are refused in one line, exit 2):
+  --n at most {MAX_N:,} per run (and the output must fit the free disk); --chunk-size at most
+  {MAX_CHUNK:,}; --seed from 0 to {MAX_SEED:,}; jacobian --digits at most {MAX_DIGITS}.
 
 configurations file (--configurations PATH, instead of sampling):
   .npz: an array q of shape (N, dof) (or (dof,) for one configuration) and optionally qd of the
-  same shape. .csv (any other suffix): one configuration per line, comma-separated; lines
-  starting with # are comments. Without a header line a row holds dof values (q) or 2 dof values
-  (q then qd), in robot.joint_names order. With a header line, its columns are joint names
-  (or q_<joint>) and optionally qd_<joint>, in any order. Without qd in the file, qd is sampled as
-  above. Values outside the joint limits are used as given and counted in the summary.
+  same shape. .csv (any other suffix): one configuration per line, comma-separated (quoted
+  fields and a UTF-8 byte order mark, as Excel and R write, are fine); lines starting with # are
+  comments. Without a header line a row holds dof values (q) or 2 dof values (q then qd), in
+  robot.joint_names order. With a header line, its columns are joint names (or q_<joint>) and
+  optionally qd_<joint>, in any order, each once (a first column with an empty name, R's row
+  names, is skipped). Without qd in the file, qd is sampled as above. Values outside the joint
+  limits are used as given and counted in the summary. PATH - reads standard input.
 
-output (written to a temporary file in the same directory, then renamed):
+output (streamed chunk by chunk to a temporary .<name>.<random>.tmp in the same directory, then
+flushed and renamed; interrupted or failed runs leave no file; --output - writes csv to standard
+output and the summary to stderr):
   --format npz (default; also chosen by an --output ending in .npz): q (N, dof), qd (N, dof),
   twist (N, 6) = J @ qd, J (N, 6, dof) geometric at --reference, Ja (N, 6, dof) analytical
   d[p; phi]/dq, margin (N,), sigma (N, min(6, dof)); metadata robot, joint_names, frame,
   reference, representation, dtype, seed, qd_scale, singular_tol, jaxkin_version.
-  --format csv (also chosen by an --output ending in .csv): one line per configuration with
+  --format csv (also chosen by an --output ending in .csv; a --format contradicting the
+  --output suffix is refused): one line per configuration with
   columns q_<joint>, qd_<joint>, vx, vy, vz, wx, wy, wz (the twist), sigma_1 ... sigma_k, margin,
   after # comment lines holding the metadata; J and Ja are in the .npz only.
   Rows of J and twist are [v; omega].
@@ -256,7 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
     jac.add_argument(
         "--point",
         nargs=3,
-        type=float,
+        type=_real,
         metavar=("X", "Y", "Z"),
         help="the point whose velocity the linear rows give, as an offset from the frame's "
         "origin in the frame's axes (m; default: the origin)",
@@ -281,7 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="output format (default: %(default)s)",
     )
     jac.add_argument(
-        "--digits", type=_positive_int, default=4, help="decimals in text output (default: 4)"
+        "--digits",
+        type=_digits,
+        default=4,
+        help=f"decimals in text output, 0 to {MAX_DIGITS} (default: %(default)s)",
     )
     _add_robot_options(jac)
     jac.add_argument(
@@ -295,9 +347,10 @@ def build_parser() -> argparse.ArgumentParser:
         "velocities",
         help="batched Jacobians and end-effector twists of sampled configurations",
         description=(
-            "Sample N configurations and joint velocities of a zoo robot; compute the geometric\n"
-            "Jacobian (hand-built, checked against jax.jacfwd), the analytical Jacobian, the\n"
-            "twist J @ qd and the singular values of J; print a summary and write an .npz."
+            "Sample N configurations and joint velocities of a robot; compute from one forward\n"
+            "pass the geometric Jacobian (hand-built; the first configurations checked against\n"
+            "jax.jacfwd), the twist J @ qd, the analytical Jacobian and the singular values of\n"
+            "J; stream them to an .npz or .csv file and print a summary naming the frame."
         ),
         epilog=_VELOCITIES_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -314,21 +367,24 @@ def build_parser() -> argparse.ArgumentParser:
     count = vel.add_mutually_exclusive_group()
     count.add_argument(
         "--n",
-        type=_positive_int,
+        type=_count,
         default=None,
-        help=f"configurations to sample (default: {DEFAULT_N})",
+        help=f"configurations to sample, at most {MAX_N:,} (default: {DEFAULT_N:,})",
     )
     count.add_argument(
         "--configurations",
         metavar="PATH",
-        help="read q (and optionally qd) from a .npz or .csv file instead of sampling; see below",
+        help="read q (and optionally qd) from a .npz or .csv file (- for standard input) "
+        "instead of sampling; see below",
     )
-    vel.add_argument("--seed", type=_seed, default=0, help="random seed (default: %(default)s)")
+    vel.add_argument(
+        "--seed", type=_seed, default=0, help=f"random seed, 0 to {MAX_SEED:,} (default: 0)"
+    )
     vel.add_argument(
         "--chunk-size",
-        type=_positive_int,
+        type=_chunk,
         default=CLI_CHUNK_SIZE,
-        help="configurations per compiled call (default: %(default)s)",
+        help=f"configurations per compiled call, at most {MAX_CHUNK:,} (default: %(default)s)",
     )
     vel.add_argument(
         "--dtype",
@@ -340,7 +396,8 @@ def build_parser() -> argparse.ArgumentParser:
     out.add_argument(
         "--output",
         metavar="PATH",
-        help="output file (default: velocities_<robot>_<n>.<format> in the current directory)",
+        help="output file, - for standard output (csv) (default: velocities_<robot>_<n>.<format> "
+        "in the current directory)",
     )
     out.add_argument("--no-output", action="store_true", help="compute and summarise only")
     vel.add_argument(
@@ -414,6 +471,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as e:  # writing the output: disk full, file too large, permission denied
+        return _usage_error(f"{e.strerror or e}: {e.filename}" if e.filename else str(e))
 
 
 def _usage_error(message: str) -> int:
@@ -430,7 +489,7 @@ def cmd_robots(args: argparse.Namespace) -> int:
         print(f"{name:<{width}}  {jk.robots.info(name).description}")
     if args.zoo:
         return 0
-    urdf = _urdf_robot_names()
+    urdf = jk.robots.erd_names()
     print()
     if urdf:
         print(f"# {len(urdf)} URDF robots of example-robot-data, loaded by name (e.g. {urdf[0]}):")
@@ -442,12 +501,6 @@ def cmd_robots(args: argparse.Namespace) -> int:
     return 0
 
 
-def _urdf_robot_names() -> list[str]:
-    """The example-robot-data names the zoo offers, [] when this jaxkin or the package lacks it."""
-    erd_names = getattr(jk.robots, "erd_names", None)
-    return list(erd_names()) if erd_names is not None else []
-
-
 def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None = None):
     """The robot ``spec`` names: a URDF path, a zoo name or an ``erd/...`` name.
 
@@ -456,7 +509,7 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
     :class:`UsageError` or a :class:`jaxkin.JaxkinError` (a bad file's message names it).
     """
     zoo = jk.robots.names()
-    urdf = _urdf_robot_names()
+    urdf = jk.robots.erd_names()
     if spec not in zoo and spec not in urdf:
         path = pathlib.Path(spec)
         if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or path.exists():
@@ -475,69 +528,115 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
 
 
 def _load_urdf_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None):
-    load_urdf = getattr(jk, "load_urdf", None)
-    if load_urdf is None:
-        raise UsageError(
-            f"cannot load {path}: this jaxkin {jk.__version__} has no URDF support (jk.load_urdf); "
-            "use a zoo robot (see 'jaxkin robots')"
-        )
     if not path.exists():
         raise UsageError(f"no such URDF file: {path}")
     if not path.is_file():
         raise UsageError(f"{path} is not a file; give the path of a .urdf file")
     try:
-        return load_urdf(path, tip=tip, base=base, dtype=dtype)
+        return jk.load_urdf(path, tip=tip, base=base, dtype=dtype)
     except OSError as e:
         raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
 
 
 # ---------------------------------------------------------------------- velocities
-def sample_configurations(
-    robot: jk.Robot, n: int, seed: int, qd_scale: float, dtype: Any
-) -> tuple[np.ndarray, np.ndarray]:
-    """Joint values uniform within the limits and joint velocities uniform in
-    ``[-qd_scale, qd_scale]``; both of shape (n, dof) and ``dtype``.
+class SampledRows:
+    """``(n, dof)`` random rows drawn block by block when read, never all at once.
 
-    An unbounded side of a joint's range is taken as -/+ pi (revolute) or -/+ 1 m (prismatic), or
-    as the finite side -/+ 2 pi (2 m) when the former would leave an empty interval.
+    Block ``b`` (``SAMPLE_BLOCK`` rows) is ``draw(b)``, a function of the block index only, so a
+    row depends on the seed and its index, not on ``n`` or the chunk size. Reading is by slices
+    (``rows[start:stop]``, a numpy array), as :func:`jaxkin.batch.chunked_map` does; the last
+    block read is kept, so reading in order draws each block once.
     """
-    lo = np.asarray(robot.lower, dtype=np.float64).copy()
-    hi = np.asarray(robot.upper, dtype=np.float64).copy()
-    for i, kind in enumerate(robot.joint_kinds):
-        w = UNBOUNDED_HALF_WIDTH[kind]
-        if not np.isfinite(lo[i]):
-            lo[i] = -w if (not np.isfinite(hi[i]) or hi[i] > -w) else hi[i] - 2 * w
-        if not np.isfinite(hi[i]):
-            hi[i] = w if lo[i] < w else lo[i] + 2 * w
-    rng = np.random.default_rng(seed)
-    q = (lo + (hi - lo) * rng.random((n, robot.dof))).astype(dtype)
-    qd = rng.uniform(-qd_scale, qd_scale, (n, robot.dof)).astype(dtype)
-    return q, qd
+
+    def __init__(self, n: int, dof: int, dtype: Any, draw: Callable[[int], Any], start: int = 0):
+        self.shape = (n - start, dof)
+        self.dtype = np.dtype(dtype)
+        self._n, self._draw, self._start = n, draw, start
+        self._cache: tuple[int, np.ndarray] | None = None
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def tail(self, k: int) -> SampledRows:
+        """The rows from ``k`` on."""
+        return SampledRows(self._n, self.shape[1], self.dtype, self._draw, self._start + k)
+
+    def _block(self, b: int) -> np.ndarray:
+        if self._cache is None or self._cache[0] != b:
+            self._cache = (b, np.asarray(self._draw(b), dtype=self.dtype))
+        return self._cache[1]
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        if not isinstance(rows, slice) or rows.step not in (None, 1):
+            raise TypeError("SampledRows reads contiguous slices only, e.g. rows[0:100]")
+        start, stop, _ = rows.indices(self.shape[0])
+        lo, hi = start + self._start, max(stop, start) + self._start
+        blocks = range(lo // SAMPLE_BLOCK, -(-hi // SAMPLE_BLOCK))
+        parts = [self._block(b)[lo - b * SAMPLE_BLOCK : hi - b * SAMPLE_BLOCK] for b in blocks]
+        return np.concatenate([np.empty((0, self.shape[1]), self.dtype), *parts])
+
+
+def sample_rows(
+    robot: jk.Robot, n: int, seed: int, qd_scale: float, dtype: Any
+) -> tuple[SampledRows, SampledRows]:
+    """``(q, qd)``, each ``(n, dof)`` :class:`SampledRows` of ``dtype``: ``q`` from
+    :func:`jaxkin.sample_configurations` (within the limits; unbounded or absurd limits in its
+    documented finite box), ``qd`` uniform in ``[-qd_scale, qd_scale]``; block ``b`` of each
+    from ``jax.random.fold_in`` of the seed's key."""
+    key_q, key_qd = jax.random.split(jax.random.key(seed))
+
+    def draw_q(b: int) -> jax.Array:
+        key = jax.random.fold_in(key_q, b)
+        return jk.sample_configurations(robot, SAMPLE_BLOCK, key, dtype=dtype)
+
+    def draw_qd(b: int) -> jax.Array:
+        key, shape = jax.random.fold_in(key_qd, b), (SAMPLE_BLOCK, robot.dof)
+        return jax.random.uniform(key, shape, dtype, minval=-qd_scale, maxval=qd_scale)
+
+    return SampledRows(n, robot.dof, dtype, draw_q), SampledRows(n, robot.dof, dtype, draw_qd)
+
+
+def results_kernel(robot: jk.Robot, frame: int | str | None, reference: str, representation: str):
+    """The per-configuration function ``f(q, qd) -> dict`` that ``velocities`` writes, from one
+    forward pass (:func:`jaxkin.jacobians.jacobian_pass`).
+
+    Output shapes for one configuration: ``q``, ``qd`` (dof,) as given; ``J`` (6, dof) hand-built
+    geometric Jacobian at ``reference``; ``twist`` (6,) ``= J @ qd``, ``[v; omega]``; ``Ja``
+    (6, dof) analytical Jacobian ``d[p; phi]/dq`` (``blkdiag(I, B(phi)^-1)`` times the
+    world-aligned ``J``) and ``margin`` () its representation margin; ``sigma`` (min(6, dof),)
+    singular values of ``J``, descending.
+    """
+    f = robot.frame_index(frame)
+
+    def per_config(q, qd):
+        g = jk.jacobians.jacobian_pass(robot, q, f, None, "world_aligned")
+        J_wa = g.matrix()
+        J = J_wa if reference == "world_aligned" else change_reference(
+            J_wa, g.pose(), "world_aligned", reference
+        )  # fmt: skip
+        phi = from_matrix(g.rotation(), representation)
+        return {
+            "q": q,
+            "qd": qd,
+            "twist": g.times(qd) if reference == "world_aligned" else J @ qd,
+            "J": J,
+            "Ja": analytical_from_geometric(J_wa, phi, representation),
+            "margin": representation_margin(phi, representation),
+            "sigma": jnp.linalg.svd(J, compute_uv=False),
+        }
+
+    return per_config
 
 
 def velocity_kernel(robot: jk.Robot, frame: int | str | None, reference: str, representation: str):
-    """The per-configuration function ``f(q, qd) -> dict`` that ``velocities`` maps.
-
-    Output shapes for one configuration: ``J`` (6, dof) hand-built geometric Jacobian at
-    ``reference``; ``Ja`` (6, dof) analytical Jacobian ``d[p; phi]/dq``; ``margin`` () its
-    representation margin; ``twist`` (6,) ``= J @ qd``, ``[v; omega]``; ``sigma`` (min(6, dof),)
-    singular values of ``J``, descending; ``jac_err`` () ``max |J - jacobian_fwd|``.
-    """
+    """:func:`results_kernel` plus ``jac_err`` () ``= max |J - jk.jacobian_fwd(...)|``, the
+    independent autodiff check that ``velocities`` runs on the first configurations."""
+    results = results_kernel(robot, frame, reference, representation)
 
     def per_config(q, qd):
-        J = jk.geometric_jacobian(robot, q, frame=frame, reference=reference)
+        out = results(q, qd)
         J_ad = jk.jacobian_fwd(robot, q, frame=frame, reference=reference)
-        Ja, margin = jk.analytical_jacobian(
-            robot, q, representation, frame=frame, return_margin=True
-        )
-        return {
-            "J": J,
-            "Ja": Ja,
-            "margin": margin,
-            "twist": J @ qd,
-            "sigma": jnp.linalg.svd(J, compute_uv=False),
-            "jac_err": jnp.max(jnp.abs(J - J_ad)),
-        }
+        return {**out, "jac_err": jnp.max(jnp.abs(out["J"] - J_ad))}
 
     return per_config
 
@@ -555,108 +654,275 @@ def _x64(enabled: bool) -> Iterator[None]:
             jax.config.update("jax_enable_x64", before)
 
 
-class AtomicOutput:
-    """An output file that appears complete or not at all.
+class _Summary:
+    """The sink every chunk of results goes through, in row order: it passes the chunk on to
+    the writer (if any) and keeps what the summary needs: the autodiff check's errors, whether
+    any joint moves the frame, non-finite rows, near-singular counts and the twist norms (min,
+    mean, max of all; median and p99 of every ``stride``-th row, so memory stays bounded)."""
 
-    Opening creates a temporary file next to ``path`` (so a bad path fails before any work);
-    :meth:`commit` writes the arrays there and renames it onto ``path`` (``os.replace``). Leaving
-    the ``with`` block without a commit (an exception, Ctrl-C) removes the temporary file.
-    """
+    def __init__(self, n: int, tol: float, writer: ResultWriter | None) -> None:
+        self.n, self.tol, self.writer, self.rows = n, tol, writer, 0
+        self.errors: list[np.ndarray] = []
+        self.moved, self.kin, self.rep, self.bad, self.first_bad = False, 0, 0, 0, None
+        self.stride = max(-(-n // NORM_SAMPLE), 1)
+        self.norms: dict[str, list[np.ndarray]] = {"v": [], "w": []}
+        self.stats = {k: [math.inf, 0.0, -math.inf] for k in self.norms}  # min, sum, max
 
-    def __init__(self, path: str) -> None:
-        self.path = os.path.abspath(path)
-        self.tmp: str | None = None
+    def append(self, chunk: dict[str, np.ndarray]) -> None:
+        chunk = dict(chunk)
+        err = chunk.pop("jac_err", None)
+        if err is not None:
+            self.errors.append(np.asarray(err, dtype=np.float64))
+        k = len(chunk["q"])
+        bad = np.zeros(k, dtype=bool)
+        for name, a in chunk.items():
+            rows = ~np.isfinite(a.reshape(k, -1)).all(axis=1)
+            if rows.any() and self.first_bad is None:
+                self.first_bad = (self.rows + int(np.argmax(rows)), name)
+            bad |= rows
+        self.bad += int(np.count_nonzero(bad))
+        self.moved = self.moved or bool(np.any(chunk["J"]))
+        sigma = chunk["sigma"]
+        self.kin += int(np.count_nonzero(~(sigma[:, -1] > self.tol * sigma[:, 0])))
+        self.rep += int(np.count_nonzero(~(chunk["margin"] >= self.tol)))
+        keep = (np.arange(self.rows, self.rows + k) % self.stride) == 0
+        for key, part in (("v", chunk["twist"][:, :3]), ("w", chunk["twist"][:, 3:])):
+            norms = np.linalg.norm(part.astype(np.float64, copy=False), axis=1)
+            lo, total, hi = self.stats[key]
+            self.stats[key] = [min(lo, norms.min()), total + norms.sum(), max(hi, norms.max())]
+            self.norms[key].append(norms[keep].astype(np.float32))
+        if self.writer is not None:
+            self.writer.append(chunk)
+        self.rows += k
 
-    def __enter__(self) -> AtomicOutput:
-        directory, name = os.path.split(self.path)
-        if os.path.isdir(self.path):
-            raise UsageError(f"output path {self.path} is a directory; give a file name")
-        if not os.path.isdir(directory):
-            raise UsageError(
-                f"cannot write {self.path}: directory {directory} does not exist; create it "
-                "or choose another --output"
-            )
-        try:
-            fd, self.tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
-        except OSError as e:
-            raise UsageError(
-                f"cannot write {self.path}: {e.strerror or e}; choose another --output"
-            ) from None
-        os.close(fd)
-        return self
+    def jac_err(self) -> tuple[float, int]:
+        errors = np.concatenate(self.errors)
+        return float(np.max(errors)), len(errors)
 
-    def commit(self, arrays: dict[str, np.ndarray], fmt: str = "npz") -> None:
-        """Write ``arrays`` (``np.savez``, or :func:`_write_csv` for ``fmt="csv"``), then rename."""
-        if self.tmp is None:
-            raise RuntimeError("AtomicOutput.commit must be called once, inside its 'with' block")
-        try:
-            with open(self.tmp, "wb") as f:
-                if fmt == "csv":
-                    _write_csv(f, arrays)
-                else:
-                    np.savez(f, **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(self.tmp, 0o666 & ~umask)
-            os.replace(self.tmp, self.path)
-        except OSError as e:
-            raise UsageError(f"cannot write {self.path}: {e.strerror or e}") from None
-        self.tmp = None
-
-    def __exit__(self, *exc: Any) -> None:
-        if self.tmp is not None:
-            with contextlib.suppress(OSError):
-                os.remove(self.tmp)
-            self.tmp = None
+    def norm_line(self, key: str, label: str) -> str:
+        lo, total, hi = self.stats[key]
+        med, p99 = np.percentile(np.concatenate(self.norms[key]), [50, 99])
+        every = "" if self.stride == 1 else f" (median, p99 of every {self.stride}th)"
+        return (
+            f"{label:<16} min {lo:.4g}  mean {total / self.n:.4g}  median {med:.4g}  "
+            f"p99 {p99:.4g}  max {hi:.4g}{every}"
+        )
 
 
 def cmd_velocities(args: argparse.Namespace) -> int:
     with _x64(args.dtype == "float64"):
         robot, label = load_robot(args.robot, args.dtype, args.tip, args.base)
         frame_name = robot.frame_names[robot.frame_index(args.frame)]
-        dtype = np.dtype(args.dtype)
-        if args.configurations is not None:
-            q, qd = read_configurations(args.configurations, robot, dtype)
-            qd_from_file = qd is not None
-            if qd is None:
-                _, qd = sample_configurations(robot, len(q), args.seed, args.qd_scale, dtype)
-        else:
-            q, qd = sample_configurations(
-                robot, args.n or DEFAULT_N, args.seed, args.qd_scale, dtype
-            )
-            qd_from_file = False
+        q, qd, source = _velocity_inputs(args, robot)
+        fmt, path = _output_choice(args, label, len(q))
+        writer = None if path is None else _open_writer(args, robot, frame_name, path, fmt, len(q))
+        with writer or contextlib.nullcontext():
+            summary = _Summary(len(q), args.singular_tol, writer)
+            stats = _run(args, robot, frame_name, q, qd, summary)
+            failures = _failures(args, summary)
+            if writer is not None and not failures:
+                writer.commit()
+        _report(args, robot, frame_name, q, source, summary, stats, path, failures)
+    for message in failures:
+        print(f"jaxkin: {message}", file=sys.stderr)
+    return 1 if failures else 0
+
+
+def _velocity_inputs(args: argparse.Namespace, robot: jk.Robot):
+    """``(q, qd, (configurations path or None, qd read from it))``."""
+    dtype = np.dtype(args.dtype)
+    if args.configurations is None:
+        return (
+            *sample_rows(robot, args.n or DEFAULT_N, args.seed, args.qd_scale, dtype),
+            (None, False),
+        )
+    q, qd = read_configurations(args.configurations, robot, dtype)
+    if qd is None:
+        return (
+            q,
+            sample_rows(robot, len(q), args.seed, args.qd_scale, dtype)[1],
+            (args.configurations, False),
+        )
+    return q, qd, (args.configurations, True)
+
+
+def _output_choice(args: argparse.Namespace, label: str, n: int) -> tuple[str | None, str | None]:
+    """``(format, path)`` of the output, ``(None, None)`` for ``--no-output``."""
+    if args.no_output:
+        return None, None
+    suffix = pathlib.Path(args.output or "").suffix.lower().lstrip(".")
+    if args.output == "-":
+        if args.format not in (None, "csv"):
+            raise UsageError("--output - (standard output) takes --format csv only")
+        return "csv", "-"
+    if args.format is None:
+        fmt = suffix if suffix in OUTPUT_FORMATS else "npz"
+    elif suffix in OUTPUT_FORMATS and suffix != args.format:
+        raise UsageError(
+            f"--format {args.format} contradicts --output {args.output} (a .{suffix} name); "
+            "change one of them"
+        )
+    else:
         fmt = args.format
-        if fmt is None:
-            suffix = pathlib.Path(args.output or "").suffix.lower().lstrip(".")
-            fmt = suffix if suffix in OUTPUT_FORMATS else "npz"
-        source = (args.configurations, qd_from_file)
-        if args.no_output:
-            return _velocities(args, robot, frame_name, q, qd, source, None, fmt)
-        path = args.output or f"velocities_{label}_{len(q)}.{fmt}"
-        with AtomicOutput(path) as output:
-            return _velocities(args, robot, frame_name, q, qd, source, output, fmt)
+    return fmt, args.output or f"velocities_{label}_{n}.{fmt}"
 
 
+def _open_writer(args, robot: jk.Robot, frame: str, path: str, fmt: str, n: int) -> ResultWriter:
+    """The output, opened before any work so that a bad path fails first."""
+    kernel = results_kernel(robot, frame, args.reference, args.representation)
+    row = jax.ShapeDtypeStruct((robot.dof,), np.dtype(args.dtype))
+    shapes = jax.eval_shape(kernel, row, row)
+    fields = {k: (s.shape, s.dtype) for k, s in shapes.items()}
+    meta = {
+        "robot": robot.name,
+        "joint_names": np.array(robot.joint_names),
+        "frame": frame,
+        "reference": args.reference,
+        "representation": args.representation,
+        "dtype": args.dtype,
+        "seed": args.seed,
+        "qd_scale": args.qd_scale,
+        "singular_tol": args.singular_tol,
+        "jaxkin_version": jk.__version__,
+    }
+    joints = list(robot.joint_names)
+    columns = {
+        "q": [f"q_{j}" for j in joints],
+        "qd": [f"qd_{j}" for j in joints],
+        "twist": ["vx", "vy", "vz", "wx", "wy", "wz"],
+        "sigma": [f"sigma_{i + 1}" for i in range(fields["sigma"][0][0])],
+        "margin": ["margin"],
+    }
+    comments = [f"jaxkin velocities: {k} = {v}" for k, v in meta.items() if k != "joint_names"]
+    comments.append("twist [vx vy vz wx wy wz] = J @ qd; J and Ja are written by --format npz only")
+    return ResultWriter(
+        path, fields, n, format=fmt, meta=meta, columns=columns, comments=comments
+    )  # fmt: skip
+
+
+def _run(args, robot: jk.Robot, frame: str, q, qd, summary: _Summary) -> list[MapStats]:
+    """The autodiff check on the first ``CHECK_ROWS`` configurations (their results written
+    too), then the one-pass kernel on the rest; every chunk goes through ``summary``."""
+    n, k = len(q), min(len(q), CHECK_ROWS)
+    check = velocity_kernel(robot, frame, args.reference, args.representation)
+    _, first = chunked_map(
+        check, q[:k], qd[:k], chunk_size=args.chunk_size, out=summary, return_stats=True
+    )
+    if not summary.moved:
+        raise UsageError(
+            f"frame {frame!r} of robot {robot.name!r} is not moved by any joint (every Jacobian "
+            f"column is zero); choose another with --frame (frames: "
+            f"{', '.join(robot.frame_names)}) or, for a URDF robot, --tip"
+        )
+    if k == n:
+        return [first]
+    show = n >= PROGRESS_MIN_N if args.progress is None else args.progress
+    bar = ProgressBar(n - k, "velocities", unit="cfg", enabled=show, force=args.progress is True)
+    fn = results_kernel(robot, frame, args.reference, args.representation)
+    rest = [a[k:] if isinstance(a, np.ndarray) else a.tail(k) for a in (q, qd)]
+    _, stats = chunked_map(
+        fn, *rest, chunk_size=args.chunk_size, progress=bar, out=summary, return_stats=True
+    )
+    return [first, stats]
+
+
+def _failures(args: argparse.Namespace, summary: _Summary) -> list[str]:
+    """One line per failed check: non-finite results, the autodiff check."""
+    failures = []
+    if summary.bad:
+        row, name = summary.first_bad
+        failures.append(
+            f"{summary.bad:,} configuration(s) gave non-finite results (first: configuration "
+            f"{row}, {name}); at a representation singularity (margin 0) choose another "
+            "--representation; no output was written"
+        )
+    err, _ = summary.jac_err()
+    if not err <= CHECK_TOL[args.dtype]:  # also for NaN
+        failures.append("the hand-built and autodiff Jacobians disagree beyond tolerance")
+    return failures
+
+
+def _report(args, robot, frame, q, source, summary, stats, path, failures) -> None:
+    """The summary, on stdout (on stderr when the results go to stdout)."""
+    n, tol = len(q), args.singular_tol
+    err, checked = summary.jac_err()
+    check_tol = CHECK_TOL[args.dtype]
+    pct = lambda k: 100.0 * k / n  # noqa: E731
+    margin_name = {"rpy": "|cos(pitch)|", "zyz": "|sin(theta)|", "rotvec": "1 - |w|/(2 pi)"}
+    run_seconds = sum(s.run_seconds for s in stats)
+    main = stats[-1]
+    lines = [
+        f"robot            {robot.name} ({robot.dof} dof: {', '.join(robot.joint_names)})",
+        f"frame            {frame}, reference {args.reference}, "
+        f"representation {args.representation}",
+        f"configurations   {_source_line(args, robot, q, source)}",
+        f"dtype            {args.dtype}",
+        f"chunks           {sum(s.n_chunks for s in stats)}: {checked:,} checked rows, then "
+        f"{main.n_chunks if len(stats) > 1 else 0} x {main.chunk_size:,} "
+        f"({sum(s.padding for s in stats):,} padding rows)",
+        f"compile          {sum(s.compile_seconds for s in stats):.2f} s "
+        "(once per kernel: checked, then one-pass)",
+        f"throughput       {n / run_seconds if run_seconds else math.inf:,.0f} configurations/s "
+        f"({run_seconds:.2f} s, compile excluded)",
+        f"check            max |J_handbuilt - J_jacfwd| = {err:.3g} over the first {checked:,} "
+        f"configurations  {'PASS' if err <= check_tol else 'FAIL'} (tol {check_tol:g})",
+        f"near kinematic singularity       {summary.kin:,} ({pct(summary.kin):.3g}%): "
+        f"sigma_min/sigma_max < {tol:g}",
+        f"near representation singularity  {summary.rep:,} ({pct(summary.rep):.3g}%): "
+        f"{margin_name[args.representation]} < {tol:g}",
+        summary.norm_line("v", "|v|     [m/s]"),
+        summary.norm_line("w", "|omega| [rad/s]"),
+        f"output           {_output_line(path, failures)}",
+    ]
+    stream = sys.stderr if path == "-" else sys.stdout
+    print("jaxkin velocities", file=stream)
+    for line in lines:
+        print(f"  {line}", file=stream)
+
+
+def _output_line(path: str | None, failures: list[str]) -> str:
+    if path is None:
+        return "none (--no-output)"
+    if path == "-":
+        return "standard output (csv)"
+    if failures:
+        return f"none: {path} not written, a check failed"
+    full = os.path.abspath(path)
+    return f"{full} ({os.path.getsize(full) / 1e6:,.1f} MB)"
+
+
+def _source_line(args: argparse.Namespace, robot: jk.Robot, q: Any, source) -> str:
+    path, qd_from_file = source
+    sampled_qd = (
+        f"qd uniform in [-{args.qd_scale:g}, {args.qd_scale:g}] rad/s or m/s, seed {args.seed}"
+    )
+    if path is None:
+        return f"{len(q):,} (seed {args.seed}, {sampled_qd.replace(f', seed {args.seed}', '')})"
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    outside = int(np.count_nonzero(np.any((q < lo) | (q > hi), axis=1)))
+    qd_text = "qd from the file" if qd_from_file else sampled_qd
+    name = "standard input" if path == "-" else path
+    return f"{len(q):,} from {name} ({qd_text}; {outside:,} outside the joint limits)"
+
+
+# ---------------------------------------------------------------------- configuration files
 def read_configurations(path: str, robot: jk.Robot, dtype: Any):
-    """``(q, qd)`` from a .npz (arrays ``q``, optional ``qd``) or CSV file; ``qd`` may be None.
+    """``(q, qd)`` from a .npz (arrays ``q``, optional ``qd``) or CSV file, or from standard
+    input for ``path="-"`` (npz if it starts like a zip, else CSV); ``qd`` may be None.
 
     Shapes (N, dof) in ``robot.joint_names`` order; see ``jaxkin velocities --help`` for the
     CSV layout. Every problem with the file is a :class:`UsageError` naming it.
     """
-    p = pathlib.Path(path)
-    if not p.is_file():
-        raise UsageError(
-            f"configurations file {path} " + ("is not a file" if p.exists() else "does not exist")
-        )
-    try:
-        if p.suffix.lower() == ".npz":
-            q, qd = _read_npz(p, robot)
+    if path == "-":
+        data = sys.stdin.buffer.read() if hasattr(sys.stdin, "buffer") else sys.stdin.read()
+        data = data.encode() if isinstance(data, str) else data
+        if data[:2] == b"PK":
+            q, qd = _read_npz(io.BytesIO(data), "standard input", robot)
         else:
-            q, qd = _read_csv(p, robot)
-    except OSError as e:
-        raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
+            text = io.StringIO(data.decode("utf-8-sig", errors="replace"), newline="")
+            q, qd = _read_csv(text, "standard input", robot)
+    else:
+        q, qd = _read_file(pathlib.Path(path), robot)
     for name, a in (("q", q), ("qd", qd)):
         if a is None:
             continue
@@ -670,6 +936,21 @@ def read_configurations(path: str, robot: jk.Robot, dtype: Any):
     return q.astype(dtype), None if qd is None else qd.astype(dtype)
 
 
+def _read_file(p: pathlib.Path, robot: jk.Robot):
+    if not p.is_file():
+        raise UsageError(
+            f"configurations file {p} " + ("is not a file" if p.exists() else "does not exist")
+        )
+    try:
+        if p.suffix.lower() == ".npz":
+            return _read_npz(p, p, robot)
+        # utf-8-sig: Excel's byte order mark; newline="": quoted fields may hold line breaks
+        with open(p, encoding="utf-8-sig", errors="replace", newline="") as f:
+            return _read_csv(f, p, robot)
+    except OSError as e:
+        raise UsageError(f"cannot read {p}: {e.strerror or e}") from None
+
+
 def _joint_shape_error(path, what: str, got: tuple, robot: jk.Robot) -> UsageError:
     return UsageError(
         f"{path}: {what} has shape {got}; robot {robot.name!r} has {robot.dof} joints "
@@ -677,13 +958,11 @@ def _joint_shape_error(path, what: str, got: tuple, robot: jk.Robot) -> UsageErr
     )
 
 
-def _read_npz(p: pathlib.Path, robot: jk.Robot):
-    import zipfile
-
-    if not zipfile.is_zipfile(p):
+def _read_npz(source: Any, p: Any, robot: jk.Robot):
+    if not zipfile.is_zipfile(source):
         raise UsageError(f"{p} is not an .npz file (numpy.savez writes one); or use a .csv file")
     try:
-        with np.load(p, allow_pickle=False) as f:
+        with np.load(source, allow_pickle=False) as f:
             arrays = {k: f[k] for k in f.files}
     except (ValueError, zipfile.BadZipFile, EOFError) as e:
         raise UsageError(f"cannot read {p} as .npz: {e}") from None
@@ -712,49 +991,36 @@ def _read_npz(p: pathlib.Path, robot: jk.Robot):
     return out[0], out[1]
 
 
-def _read_csv(p: pathlib.Path, robot: jk.Robot):
-    names = list(robot.joint_names)
-    header, rows = None, []
-    with open(p, encoding="utf-8", errors="replace") as f:
+def _read_csv(f: Any, p: Any, robot: jk.Robot):
+    """Rows of a CSV text stream (``csv`` module: quoted fields, as R writes; comment lines
+    start with #): ``(q, qd or None)``."""
+    where = [0]  # line number of the last line read
+
+    def lines() -> Iterator[str]:
         for lineno, line in enumerate(f, start=1):
-            text = line.strip()
-            if not text or text.startswith("#"):
-                continue
-            fields = [x.strip() for x in text.split(",")]
+            if line.strip() and not line.lstrip().startswith("#"):
+                where[0] = lineno
+                yield line
+
+    header, rows = None, []
+    try:
+        for fields in csv.reader(lines()):
+            fields = [x.strip() for x in fields]
             try:
-                rows.append((lineno, [float(x) for x in fields]))
+                rows.append((where[0], [float(x) for x in fields]))
             except ValueError:
                 if header is None and not rows:
                     header = fields
                     continue
                 raise UsageError(
-                    f"{p} line {lineno}: not a row of numbers: {text[:80]!r}"
+                    f"{p} line {where[0]}: not a row of numbers: {','.join(fields)[:80]!r}"
                 ) from None
-    if header is not None:
-        columns = {}
-        for k, h in enumerate(header):
-            key = h[2:] if h.startswith("q_") and h[2:] in names else h
-            if key in names:
-                columns[("q", key)] = k
-            elif h.startswith("qd_") and h[3:] in names:
-                columns[("qd", h[3:])] = k
-            else:
-                raise UsageError(
-                    f"{p}: unknown column {h!r}; columns are joint names {names} (or q_<joint>) "
-                    "and optionally qd_<joint>"
-                )
-        missing = [n for n in names if ("q", n) not in columns]
-        if missing:
-            raise UsageError(f"{p}: no column for joint(s) {missing} of robot {robot.name!r}")
-        has_qd = any(k[0] == "qd" for k in columns)
-        if has_qd and not all(("qd", n) in columns for n in names):
-            raise UsageError(f"{p}: give qd_<joint> for every joint {names} or for none")
-        order = [columns[("q", n)] for n in names]
-        if has_qd:
-            order += [columns[("qd", n)] for n in names]
-        width = len(header)
-    else:
-        order, width = None, None
+    except csv.Error as e:
+        raise UsageError(f"{p} line {where[0]}: {e}") from None
+    if header and header[0] == "":  # R's write.csv: a first column of row names
+        header, rows = header[1:], [(i, r[1:]) for i, r in rows]
+    order = None if header is None else _csv_columns(header, p, robot)
+    width = None if header is None else len(header)
     table = []
     for lineno, values in rows:
         if width is not None and len(values) != width:
@@ -762,7 +1028,8 @@ def _read_csv(p: pathlib.Path, robot: jk.Robot):
         if width is None and len(values) not in (robot.dof, 2 * robot.dof):
             raise UsageError(
                 f"{p} line {lineno}: {len(values)} values; robot {robot.name!r} has {robot.dof} "
-                f"joints ({', '.join(names)}): give {robot.dof} (q) or {2 * robot.dof} (q, qd)"
+                f"joints ({', '.join(robot.joint_names)}): give {robot.dof} (q) or "
+                f"{2 * robot.dof} (q, qd)"
             )
         table.append([values[k] for k in order] if order is not None else values)
     if not table:
@@ -775,140 +1042,35 @@ def _read_csv(p: pathlib.Path, robot: jk.Robot):
     return a, None
 
 
-def _velocities(
-    args: argparse.Namespace,
-    robot: jk.Robot,
-    frame_name: str,
-    q: np.ndarray,
-    qd: np.ndarray,
-    source: tuple[str | None, bool],
-    output: AtomicOutput | None,
-    fmt: str,
-) -> int:
-    n = len(q)
-    fn = velocity_kernel(robot, frame_name, args.reference, args.representation)
-    if args.progress is None:
-        show = n >= PROGRESS_MIN_N
-        bar = ProgressBar(n, "velocities", unit="cfg", enabled=show)
-    else:
-        bar = ProgressBar(n, "velocities", unit="cfg", enabled=args.progress, force=True)
-    res, stats = chunked_map(fn, q, qd, chunk_size=args.chunk_size, progress=bar, return_stats=True)
-
-    tol = args.singular_tol
-    sigma = res["sigma"]
-    kin_singular = int(np.count_nonzero(~(sigma[:, -1] > tol * sigma[:, 0])))
-    rep_singular = int(np.count_nonzero(~(res["margin"] >= tol)))
-    jac_err = float(np.max(res["jac_err"]))
-    check_tol = CHECK_TOL[args.dtype]
-    passed = jac_err <= check_tol  # False for NaN
-
-    if output is not None:
-        arrays = {
-            "q": q,
-            "qd": qd,
-            "twist": res["twist"],
-            "J": res["J"],
-            "Ja": res["Ja"],
-            "margin": res["margin"],
-            "sigma": sigma,
-            "robot": np.array(robot.name),
-            "joint_names": np.array(robot.joint_names),
-            "frame": np.array(frame_name),
-            "reference": np.array(args.reference),
-            "representation": np.array(args.representation),
-            "dtype": np.array(args.dtype),
-            "seed": np.array(args.seed),
-            "qd_scale": np.array(args.qd_scale),
-            "singular_tol": np.array(tol),
-            "jaxkin_version": np.array(jk.__version__),
-        }
-        output.commit(arrays, fmt)
-
-    pct = lambda k: 100.0 * k / n  # noqa: E731
-    margin_name = {"rpy": "|cos(pitch)|", "zyz": "|sin(theta)|", "rotvec": "1 - |w|/(2 pi)"}
-    lines = [
-        f"robot            {robot.name} ({robot.dof} dof: {', '.join(robot.joint_names)})",
-        f"frame            {frame_name}, reference {args.reference}, "
-        f"representation {args.representation}",
-        f"configurations   {_source_line(args, robot, q, source)}",
-        f"dtype            {args.dtype}",
-        f"chunks           {stats.n_chunks} x {stats.chunk_size:,} "
-        f"({stats.padding:,} padding rows)",
-        f"compile          {stats.compile_seconds:.2f} s (once, for the chunk shape)",
-        f"throughput       {stats.rate:,.0f} configurations/s "
-        f"({stats.run_seconds:.2f} s, compile excluded)",
-        f"check            max |J_handbuilt - J_jacfwd| = {jac_err:.3g}  "
-        f"{'PASS' if passed else 'FAIL'} (tol {check_tol:g})",
-        f"near kinematic singularity       {kin_singular:,} ({pct(kin_singular):.3g}%): "
-        f"sigma_min/sigma_max < {tol:g}",
-        f"near representation singularity  {rep_singular:,} ({pct(rep_singular):.3g}%): "
-        f"{margin_name[args.representation]} < {tol:g}",
-        _norm_line("|v|     [m/s]", res["twist"][:, :3]),
-        _norm_line("|omega| [rad/s]", res["twist"][:, 3:]),
-    ]
-    if output is not None:
-        size = os.path.getsize(output.path)
-        lines.append(f"output           {output.path} ({size / 1e6:,.1f} MB)")
-    else:
-        lines.append("output           none (--no-output)")
-    print("jaxkin velocities")
-    for line in lines:
-        print(f"  {line}")
-    if not passed:
-        print(
-            "jaxkin: the hand-built and autodiff Jacobians disagree beyond tolerance",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
-
-
-def _norm_line(label: str, vectors: np.ndarray) -> str:
-    norms = np.linalg.norm(vectors.astype(np.float64, copy=False), axis=1)
-    lo, med, p99, hi = np.percentile(norms, [0, 50, 99, 100])
-    return (
-        f"{label:<16} min {lo:.4g}  mean {norms.mean():.4g}  median {med:.4g}  "
-        f"p99 {p99:.4g}  max {hi:.4g}"
+def _csv_columns(header: list[str], p: Any, robot: jk.Robot) -> list[int]:
+    """Column indices of q (then qd, if given) in joint order, from a header line."""
+    names = list(robot.joint_names)
+    columns: dict[tuple[str, str], int] = {}
+    for k, h in enumerate(header):
+        if h.startswith("qd_") and h[3:] in names:
+            key = ("qd", h[3:])
+        elif h in names or (h.startswith("q_") and h[2:] in names):
+            key = ("q", h if h in names else h[2:])
+        else:
+            raise UsageError(
+                f"{p}: unknown column {h!r}; columns are joint names {names} (or q_<joint>) "
+                "and optionally qd_<joint>"
+            )
+        if key in columns:
+            raise UsageError(
+                f"{p}: column {h!r} duplicates column {header[columns[key]]!r} (both give "
+                f"{key[0]} of joint {key[1]!r}); keep one"
+            )
+        columns[key] = k
+    missing = [n for n in names if ("q", n) not in columns]
+    if missing:
+        raise UsageError(f"{p}: no column for joint(s) {missing} of robot {robot.name!r}")
+    has_qd = any(k[0] == "qd" for k in columns)
+    if has_qd and not all(("qd", n) in columns for n in names):
+        raise UsageError(f"{p}: give qd_<joint> for every joint {names} or for none")
+    return [columns[("q", n)] for n in names] + (
+        [columns[("qd", n)] for n in names] if has_qd else []
     )
-
-
-def _source_line(args: argparse.Namespace, robot: jk.Robot, q: np.ndarray, source) -> str:
-    path, qd_from_file = source
-    sampled_qd = (
-        f"qd uniform in [-{args.qd_scale:g}, {args.qd_scale:g}] rad/s or m/s, seed {args.seed}"
-    )
-    if path is None:
-        return f"{len(q):,} (seed {args.seed}, {sampled_qd.replace(f', seed {args.seed}', '')})"
-    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
-    outside = int(np.count_nonzero(np.any((q < lo) | (q > hi), axis=1)))
-    qd_text = "qd from the file" if qd_from_file else sampled_qd
-    return f"{len(q):,} from {path} ({qd_text}; {outside:,} outside the joint limits)"
-
-
-def _write_csv(f, arrays: dict[str, np.ndarray]) -> None:
-    """One line per configuration: q_*, qd_*, the twist, sigma_*, margin; metadata as comments."""
-    joints = [str(j) for j in arrays["joint_names"]]
-    meta = [
-        "robot", "frame", "reference", "representation", "dtype", "seed", "qd_scale",
-        "singular_tol", "jaxkin_version",
-    ]  # fmt: skip
-    lines = [f"# jaxkin velocities: {k} = {arrays[k]}" for k in meta]
-    lines.append("# twist [vx vy vz wx wy wz] = J @ qd; J and Ja are written by --format npz only")
-    k = arrays["sigma"].shape[1]
-    header = (
-        [f"q_{j}" for j in joints]
-        + [f"qd_{j}" for j in joints]
-        + ["vx", "vy", "vz", "wx", "wy", "wz"]
-        + [f"sigma_{i + 1}" for i in range(k)]
-        + ["margin"]
-    )
-    table = np.concatenate(
-        [arrays["q"], arrays["qd"], arrays["twist"], arrays["sigma"], arrays["margin"][:, None]],
-        axis=1,
-    )
-    digits = 17 if table.dtype == np.float64 else 9
-    f.write(("\n".join(lines) + "\n" + ",".join(header) + "\n").encode())
-    np.savetxt(f, table, fmt=f"%.{digits}g", delimiter=",")
 
 
 # ---------------------------------------------------------------------- jacobian
