@@ -228,6 +228,11 @@ class Robot:
             return self.frame_names.index(d[0])
         raise self._no_default_frame()
 
+    @property
+    def has_default_frame(self) -> bool:
+        """Whether ``frame=None`` means a frame (:attr:`tip_frame` does not raise)."""
+        return len(self.default_frames) <= 1
+
     def _no_default_frame(self) -> NoDefaultFrameError:
         cands = list(self.default_frames)
         shown = cands if len(cands) <= 30 else [*cands[:30], "..."]

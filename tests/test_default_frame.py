@@ -97,6 +97,7 @@ def test_branching_robot_loads_but_the_default_frame_raises_listing_candidates()
             jax.jit(call)(q)  # static information: raised while tracing
     with pytest.raises(NoDefaultFrameError):
         _ = robot.tip_frame
+    assert not robot.has_default_frame
     # what does not use the default frame works
     Ts = jk.fk_all(robot, q)
     for f in ("finger_l", "finger_r", "hand"):
@@ -128,6 +129,7 @@ def test_chain_takes_the_fixed_leaf_off_the_last_moving_link():
     robot = jk.load_urdf(xml, dtype=np.float64)
     assert robot.frame_names[-1] == "sensor"
     assert robot.frame_names[robot.tip_frame] == "tcp" and robot.frame_index(None) == 5
+    assert robot.has_default_frame
     q = np.array([0.1, -0.4, 0.7])
     np.testing.assert_array_equal(jk.fk(robot, q), jk.fk(robot, q, frame="tcp"))
     assert np.all(np.any(np.asarray(jk.geometric_jacobian(robot, q)) != 0.0, axis=0))
