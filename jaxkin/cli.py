@@ -572,7 +572,9 @@ class SampledRows:
         start, stop, _ = rows.indices(self.shape[0])
         lo, hi = start + self._start, max(stop, start) + self._start
         blocks = range(lo // SAMPLE_BLOCK, -(-hi // SAMPLE_BLOCK))
-        parts = [self._block(b)[lo - b * SAMPLE_BLOCK : hi - b * SAMPLE_BLOCK] for b in blocks]
+        parts = [
+            self._block(b)[max(lo - b * SAMPLE_BLOCK, 0) : hi - b * SAMPLE_BLOCK] for b in blocks
+        ]
         return np.concatenate([np.empty((0, self.shape[1]), self.dtype), *parts])
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin.batch import MapStats, ProgressBar, chunked_map
+from jaxkin.batch import MapStats, ProgressBar, chunked_map, stream_map
 
 
 def row_fn(x, y):
@@ -214,3 +214,33 @@ def test_progress_bar_close_draws_unfinished_state():
         bar.update(3)
         bar.update(2)  # not drawn (too soon)
     assert "5/10" in stream.getvalue() and stream.getvalue().endswith("\n")
+
+
+# ---------------------------------------------------------------------- streams and sources
+def test_stream_map_refuses_a_batch_of_another_dtype_or_width():
+    x, _ = inputs(10)
+    fn = lambda r: r * 2  # noqa: E731
+    parts = list(stream_map(fn, [x[:3], x[3:4], x[4:10]], chunk_size=4))
+    np.testing.assert_array_equal(np.concatenate(parts), 2 * x)
+    with pytest.raises(jk.ShapeError, match=r"batch 1 .*\('float64', \(2,\)\).*first batch"):
+        list(stream_map(fn, [x[:3], x[3:5, :2]], chunk_size=4))
+    with pytest.raises(jk.ShapeError, match=r"batch 2 .*int64"):
+        list(stream_map(fn, [x[:3], x[3:5], np.ones((2, 3), np.int64)], chunk_size=4))
+
+
+class RowSource:
+    """An input read slice by slice (as an h5py dataset), recording the slices asked for."""
+
+    def __init__(self, a):
+        self.a, self.shape, self.dtype, self.reads = a, a.shape, a.dtype, []
+
+    def __getitem__(self, rows):
+        self.reads.append((rows.start, rows.stop))
+        return self.a[rows]
+
+
+def test_row_sources_are_read_chunk_by_chunk():
+    x, y = inputs(13)
+    source = RowSource(x)
+    assert_tree_equal(chunked_map(row_fn, source, y, chunk_size=4), reference(x, y), rtol=1e-14)
+    assert source.reads == [(0, 4), (4, 8), (8, 12), (12, 13)]

@@ -1,5 +1,7 @@
 """The command line: `jaxkin velocities` end to end (in-process), its errors, atomic output."""
 
+import collections
+import io
 import os
 import subprocess
 import sys
@@ -508,6 +510,7 @@ TINY_URDF = """<?xml version="1.0"?>
 </robot>
 """
 
+
 def test_urdf_file_jacobian_and_velocities(capsys, in_tmp):
     (in_tmp / "arm.urdf").write_text(TINY_URDF)
     robot = jk.load_urdf(in_tmp / "arm.urdf", dtype="float64")
@@ -533,3 +536,187 @@ def test_bad_urdf_files_are_one_line_errors(capsys, in_tmp):
     assert_usage_error(capsys, "jacobian", "arm.urdf", "--tip", "nolink", match="nolink")
     os.mkdir(in_tmp / "dir.urdf")
     assert_usage_error(capsys, "velocities", "dir.urdf", "--n", "3", match="is not a file")
+
+
+# ---------------------------------------------------------------------- renovation: streaming,
+# one pass, library sampler, files and limits
+HANGING_URDF = """<?xml version="1.0"?>
+<robot name="hanging">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="sensor"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-1.79e308" upper="1.79e308" effort="1" velocity="1"/>
+  </joint>
+  <joint name="j2" type="continuous"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 1 0"/>
+  </joint>
+  <joint name="mount" type="fixed"><parent link="base"/><child link="sensor"/>
+    <origin xyz="0 0 0.5"/>
+  </joint>
+</robot>
+"""
+
+
+def test_library_sampler_block_by_block(capsys, in_tmp):
+    robot = jk.robots.load("niryo_one", dtype="float64")
+    q, qd = cli.sample_rows(robot, cli.SAMPLE_BLOCK + 10, 5, 0.5, np.float64)
+    key_q = jax.random.split(jax.random.key(5))[0]
+    second = jk.sample_configurations(robot, cli.SAMPLE_BLOCK, jax.random.fold_in(key_q, 1))
+    np.testing.assert_array_equal(q[cli.SAMPLE_BLOCK - 2 : cli.SAMPLE_BLOCK + 10][2:], second[:10])
+    np.testing.assert_array_equal(q.tail(3)[0:4], q[3:7])
+    assert np.all(np.abs(qd[0:100]) <= 0.5)
+    # a row depends on the seed and its index only, not on n or the chunk size
+    code, _, _ = run(capsys, "velocities", "--n", "1200", "--chunk-size", "64", "--seed", "5",
+                     "--output", "a.npz")  # fmt: skip
+    assert code == 0
+    np.testing.assert_array_equal(load(in_tmp / "a.npz")["q"], q[0:1200])
+
+
+def test_one_forward_pass_and_bounded_check(capsys, monkeypatch, in_tmp):
+    calls = {"pass": 0, "fwd": 0}
+    real_pass, real_fwd = jk.jacobians.jacobian_pass, jk.jacobian_fwd
+
+    def counted_pass(*args, **kwargs):
+        calls["pass"] += 1
+        return real_pass(*args, **kwargs)
+
+    def counted_fwd(*args, **kwargs):
+        calls["fwd"] += 1
+        return real_fwd(*args, **kwargs)
+
+    monkeypatch.setattr(jk.jacobians, "jacobian_pass", counted_pass)
+    monkeypatch.setattr(jk, "jacobian_fwd", counted_fwd)
+    robot = jk.robots.load("niryo_one", dtype="float64")
+    fn = cli.results_kernel(robot, None, "world", "zyz")
+    jax.make_jaxpr(fn)(np.zeros(6), np.zeros(6))
+    assert calls == {"pass": 1, "fwd": 0}  # J, the twist and Ja from one forward pass
+    code, out, _ = run(capsys, "velocities", "--n", "1500", "--reference", "world",
+                       "--representation", "zyz", "--output", "w.npz")  # fmt: skip
+    assert code == 0 and "over the first 1,000 configurations  PASS" in out
+    d = load(in_tmp / "w.npz")
+    rows = [0, 999, 1000, 1499]  # checked and unchecked rows alike
+    J, Ja, margin = recompute(robot, d["q"][rows], None, "world", "zyz")
+    np.testing.assert_allclose(d["J"][rows], J, atol=1e-13)
+    np.testing.assert_allclose(d["Ja"][rows], Ja, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(d["margin"][rows], margin, atol=1e-14)
+
+
+def test_unbounded_limits_sampled_finite_and_frame_checks(capsys, in_tmp):
+    (in_tmp / "hang.urdf").write_text(HANGING_URDF)
+    code, out, _ = run(capsys, "velocities", "hang.urdf", "--n", "50", "--frame", "l2")
+    assert code == 0 and "frame            l2," in out
+    d = load(in_tmp / "velocities_hang_50.npz")
+    assert np.all(np.isfinite(d["q"])) and np.all(np.abs(d["q"]) <= np.pi)  # not +-1.79e308
+    # a fixed leaf off the root: no joint moves it, whichever way it was chosen
+    assert_usage_error(
+        capsys,
+        "velocities",
+        "hang.urdf",
+        "--n",
+        "50",
+        "--frame",
+        "sensor",
+        "--output",
+        "s.npz",
+        match="frame 'sensor' of robot 'hanging' is not moved",
+    )
+    assert not (in_tmp / "s.npz").exists() and not any(p.startswith(".") for p in os.listdir())
+    code, out, err = run(capsys, "velocities", "hang.urdf", "--n", "20", "--output", "x.npz")
+    frame = jk.load_urdf(in_tmp / "hang.urdf").frame_names[-1]
+    if code == 0:  # the default frame is moved by some joint and named in the summary
+        assert str(load(in_tmp / "x.npz")["frame"]) in out and np.any(load(in_tmp / "x.npz")["J"])
+    else:
+        assert code == 2 and "is not moved by any joint" in err and err.count("\n") == 1
+    assert frame in jk.load_urdf(in_tmp / "hang.urdf").frame_names
+
+
+def test_non_finite_results_fail(capsys, monkeypatch, in_tmp):
+    kernel = cli.results_kernel
+
+    def overflowing(*args):
+        fn = kernel(*args)
+        return lambda q, qd: {**fn(q, qd), "twist": fn(q, qd)["twist"] * np.inf}
+
+    monkeypatch.setattr(cli, "results_kernel", overflowing)
+    code, out, err = run(capsys, "velocities", "two_link_planar", "--n", "1100", "--output",
+                         "v.npz")  # fmt: skip
+    assert code == 1 and "1,100 configuration(s) gave non-finite results" in err
+    assert "(first: configuration 0, twist)" in err
+    assert "not written" in out and os.listdir(in_tmp) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["velocities", "--n", "1e9"], "argument --n: expected an integer from 1 to 100,000,000"),
+        (["velocities", "--n", "10", "--chunk-size", "1e12"], "argument --chunk-size"),
+        (["velocities", "--n", "10", "--seed", "1e30"], "argument --seed"),
+        (["jacobian", "niryo_one", "--digits", "1e8"], "argument --digits"),
+        (
+            ["jacobian", "niryo_one", "--point", "nan", "0", "0"],
+            "argument --point: expected a finite",
+        ),
+        (["jacobian", "niryo_one", "--q", "nan", "0", "0", "0", "0", "0"], "--q must be finite"),
+        (["velocities", "--n", "10", "--format", "csv", "--output", "x.npz"], "contradicts"),
+        (["velocities", "--n", "10", "--format", "npz", "--output", "-"], "csv only"),
+    ],
+)
+def test_absurd_sizes_and_contradictions(capsys, argv, match):
+    assert_usage_error(capsys, *argv, match=match)
+
+
+def test_output_that_cannot_fit_the_disk(capsys, monkeypatch, in_tmp):
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(jk.batch.shutil, "disk_usage", lambda path: usage(10**6, 0, 1000))
+    assert_usage_error(capsys, "velocities", "--n", "100", "--output", "v.npz",
+                       match="GB free")  # fmt: skip
+    assert os.listdir(in_tmp) == []
+
+
+def test_help_states_limits_and_dash(capsys):
+    code, out, _ = run(capsys, "velocities", "--help")
+    flat = " ".join(out.split())
+    assert code == 0
+    for words in ("at most 100,000,000", "- for standard input", "- for standard output",
+                  "fold_in", "first 1,000 configurations", "byte order mark"):  # fmt: skip
+        assert words in flat, words
+
+
+def test_csv_from_excel_r_stdin_and_duplicates(capsys, monkeypatch, in_tmp):
+    (in_tmp / "excel.csv").write_bytes(b"\xef\xbb\xbfjoint1,joint2\r\n0.1,0.2\r\n0.3,0.4\r\n")
+    (in_tmp / "r.csv").write_text('"","joint1","joint2","qd_joint1","qd_joint2"\n'
+                                  '"1",0.1,0.2,1,2\n"2",0.3,0.4,3,4\n')  # fmt: skip
+    for name in ("excel.csv", "r.csv"):
+        code, out, _ = run(capsys, "velocities", "two_link_planar", "--configurations", name,
+                           "--output", f"{name}.npz")  # fmt: skip
+        assert code == 0, out
+        np.testing.assert_array_equal(load(in_tmp / f"{name}.npz")["q"], [[0.1, 0.2], [0.3, 0.4]])
+    np.testing.assert_array_equal(load(in_tmp / "r.csv.npz")["qd"], [[1, 2], [3, 4]])
+    (in_tmp / "dup.csv").write_text("joint1,joint2,q_joint1\n0,0,0\n")
+    assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations", "dup.csv",
+                       match="column 'q_joint1' duplicates column 'joint1'")  # fmt: skip
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"0.5,0.25\n")))
+    code, out, err = run(capsys, "velocities", "two_link_planar", "--configurations", "-",
+                         "--output", "-")  # fmt: skip
+    assert code == 0 and "1 from standard input" in err and "output           standard" in err
+    lines = [line for line in out.splitlines() if not line.startswith("#")]
+    assert lines[0].startswith("q_joint1,q_joint2,qd_joint1") and lines[1].startswith("0.5,0.25,")
+
+
+def test_streams_results_to_disk(capsys, monkeypatch, in_tmp):
+    """Results go to the file chunk by chunk: no chunk handed to the writer exceeds the chunk
+    size, and chunked_map never returns the whole results."""
+    sizes, real = [], jk.batch.ResultWriter.append
+
+    def spy(self, rows):
+        sizes.append(len(rows["q"]))
+        return real(self, rows)
+
+    monkeypatch.setattr(jk.batch.ResultWriter, "append", spy)
+    code, _, _ = run(capsys, "velocities", "two_link_planar", "--n", "5000", "--chunk-size",
+                     "512", "--output", "s.csv")  # fmt: skip
+    assert code == 0 and sum(sizes) == 5000 and max(sizes) <= 1000
+    assert len(load_csv_rows(in_tmp / "s.csv")) == 5000
+
+
+def load_csv_rows(path):
+    return [line for line in path.read_text().splitlines() if not line.startswith("#")][1:]
