@@ -203,15 +203,18 @@ def check_reference(reference: Any) -> str:
     return reference
 
 
-def check_J(J: Any, fn: str) -> jax.Array:
-    """A Jacobian of shape (m, dof), m and dof >= 1, as a float JAX array."""
+def check_J(J: Any, fn: str, batch_hint: str | None = None) -> jax.Array:
+    """A Jacobian of shape (m, dof), m and dof >= 1, as a float JAX array. ``batch_hint``: the
+    code suggested for a batch of Jacobians ``Js`` (default ``jax.vmap(fn)(Js)``); it must run
+    when pasted, with the function's other arguments under their parameter names."""
     J = _as_array(J, "J", fn, "an array of numbers")
     _numeric(J, "J", fn)
     shape = tuple(J.shape)
     if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
         hint = ""
         if len(shape) == 3:
-            hint = f" For a batch of Jacobians use jax.vmap, e.g. jax.vmap({fn})(Js)."
+            code = batch_hint or f"jax.vmap({fn})(Js)"
+            hint = f" For a batch of Jacobians use jax.vmap, e.g. {code}."
         raise ShapeError(
             f"{fn}: J must have shape (m, dof) (e.g. (6, dof) from jk.geometric_jacobian), got "
             f"shape {shape}.{hint}"
@@ -222,9 +225,11 @@ def check_J(J: Any, fn: str) -> jax.Array:
     return J
 
 
-def check_J_and_vector(J: Any, v: Any, fn: str, what: str = "v") -> tuple[jax.Array, jax.Array]:
+def check_J_and_vector(
+    J: Any, v: Any, fn: str, what: str = "v", batch_hint: str | None = None
+) -> tuple[jax.Array, jax.Array]:
     """A Jacobian (m, dof) and a vector (m,) (e.g. a twist), cast to one float dtype."""
-    J = check_J(J, fn)
+    J = check_J(J, fn, batch_hint or f"jax.vmap({fn})(Js, {what}s)")
     m = J.shape[0]
     meaning = f"to match J's {m} rows: a twist [v; omega] for a geometric Jacobian"
     v = jnp.asarray(check_vector(v, m, what, fn, meaning, " Batch with jax.vmap."))

@@ -49,10 +49,10 @@ __all__ = [
 ]
 
 
-def _check_call(robot: Robot, q: Any, qd: Any, frame, point, reference: str, fn: str):
+def _check_call(robot: Robot, q: Any, qd: Any, frame, point, reference: str, fn: str, hint=None):
     """Entry checks shared by the derivatives: ``(q, qd, frame index, point)``, one dtype."""
     check_reference(reference)
-    hint = f"jax.vmap(lambda q, qd: {fn}(robot, q, qd))(qs, qds)"
+    hint = hint or f"jax.vmap(lambda q, qd: {fn}(robot, q, qd))(qs, qds)"
     q = check_q(robot, q, fn=fn, batch_hint=hint)
     qd = check_q(robot, qd, what="qd", fn=fn, batch_hint=hint)
     dtype = result_dtype(robot, q, qd)
@@ -160,7 +160,9 @@ def kinematic_hessian(
     >>> bool(jnp.allclose(jnp.einsum("k,kij->ij", qd, H), jk.jacobian_dot(robot, q, qd)))
     True
     """
-    q, _, f, pt = _check_call(robot, q, q, frame, point, reference, "jk.kinematic_hessian")
+    fn = "jk.kinematic_hessian"
+    hint = f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
+    q, _, f, pt = _check_call(robot, q, q, frame, point, reference, fn, hint)
 
     def J(qq):
         return jacobian_pass(robot, qq, f, pt, reference).matrix()

@@ -153,7 +153,7 @@ def frame_jacobian(
     >>> J.shape, T.shape
     ((6, 6), (4, 4))
     """
-    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.frame_jacobian")
+    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.jacobians.frame_jacobian")
     g = jacobian_pass(robot, q, f, pt, reference)
     return g.matrix(), g.pose()
 

@@ -358,7 +358,12 @@ def finite_difference_jacobian(
     if not jax.config.read("jax_enable_x64"):
         raise RuntimeError("finite_difference_jacobian needs jax_enable_x64 (float64).")
     robot = robot.astype(np.float64)
-    q = check_q(robot, q, fn="finite_difference_jacobian").astype(jnp.float64)
+    q = check_q(
+        robot,
+        q,
+        fn="jk.testing.finite_difference_jacobian",
+        batch_hint="jax.numpy.stack([jk.testing.finite_difference_jacobian(robot, q) for q in qs])",
+    ).astype(jnp.float64)
     f = robot.frame_index(frame)
     pt = None if point is None else jnp.asarray(point, dtype=jnp.float64)
 
@@ -396,7 +401,8 @@ def assert_jacobian_consistent(
     float32, reach being the largest distance of a frame from the base. Finite differences run
     only in float64 (default: whenever x64 is on and the robot is float64).
     """
-    q = check_q(robot, q, fn="assert_jacobian_consistent")
+    fn = "jk.testing.assert_jacobian_consistent"
+    q = check_q(robot, q, fn=fn, batch_hint=f"[{fn}(robot, q) for q in qs]")
     is64 = result_dtype(robot, q) == np.float64
     Ts = forward_pass(robot, q)
     reach = float(jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1)))

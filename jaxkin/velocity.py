@@ -81,6 +81,9 @@ def point_velocity(
     >>> bool(jnp.allclose(v, jnp.array([-1.1, 1.0, 0.0])))
     True
     """
+    hint = "jax.vmap(lambda q, qd: jk.point_velocity(robot, q, qd, point))(qs, qds)"
+    q = check_q(robot, q, fn="jk.point_velocity", batch_hint=hint)
+    qd = check_q(robot, qd, what="qd", fn="jk.point_velocity", batch_hint=hint)
     return twist(robot, q, qd, frame=frame, point=point)[:3]
 
 
