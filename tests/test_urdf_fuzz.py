@@ -200,7 +200,8 @@ def _check_loaded(robot: jk.Robot, rng: np.random.Generator, what: str) -> None:
     q = np.clip(rng.uniform(-1.0, 1.0, robot.dof), lo, hi)
     Ts = np.asarray(jk.fk_all(robot, q))
     assert np.all(np.isfinite(Ts)), what
-    J = np.asarray(jk.geometric_jacobian(robot, q, reference="world"))
+    # the last frame (a mutant may branch: then there is no default frame)
+    J = np.asarray(jk.geometric_jacobian(robot, q, frame=-1, reference="world"))
     assert np.all(np.isfinite(J)), what
 
 
