@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -216,111 +216,15 @@ def from_joints(
     dt = resolve_dtype(dtype)
     frame_names = [str(root)]
     frame_of = {str(root): 0}  # name -> frame index (O(1) lookups for long chains)
-    xyz, rpy, axes, kinds, parents, q_index = [], [], [], [], [], []
-    lowers, uppers, joint_names, all_names = [], [], [], []
-    mimics: dict[str, tuple[str, float, float]] = {}  # joint name -> (leader, mult, offset)
-    limits: dict[str, tuple[float, float] | None] = {}
-    allowed = {
-        "name",
-        "type",
-        "child",
-        "parent",
-        "xyz",
-        "rpy",
-        "axis",
-        "lower",
-        "upper",
-        "mimic",
-    }
-    for j, spec in enumerate(joints):
-        where = f"joint {j}"
-        _check_keys(
-            spec, where, allowed, ("name", "type", "child"), "every joint needs name, type, child"
-        )
-        jname = str(spec["name"])
-        where = f"joint {jname!r}"
-        kind = spec["type"]
-        if kind not in JOINT_KINDS:
-            raise ModelError(
-                f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic' or 'fixed'."
-            )
-        parent_name = spec.get("parent", frame_names[-1])
-        if not isinstance(parent_name, str) or parent_name not in frame_of:
-            shown = frame_names if len(frame_names) <= 20 else [*frame_names[:20], "..."]
-            raise ModelError(
-                f"{where}: parent frame {parent_name!r} is not defined by an earlier joint "
-                f"(known frames: {shown}). List parents before children."
-            )
-        child = str(spec["child"])
-        if child in frame_of:
-            raise ModelError(f"{where}: frame {child!r} already has a parent.")
-        xyz.append(_vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'"))
-        rpy.append(_vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'"))
-        ax = _vector3(spec.get("axis", (1.0, 0.0, 0.0)), f"{where}, key 'axis'")
-        # Overflow- and underflow-safe norm (math.hypot scales internally).
-        norm = math.hypot(*(float(x) for x in ax))
-        if kind != "fixed" and norm == 0.0:
-            raise ModelError(f"{where} has a zero axis; give a non-zero direction.")
-        if norm == 0.0:
-            ax = np.array([1.0, 0.0, 0.0])
-        elif abs(norm - 1.0) > 4 * np.finfo(np.float64).eps:
-            ax = ax / norm  # a unit axis (to rounding) is kept bit for bit: idempotent
-        axes.append(ax)
-        kinds.append(kind)
-        parents.append(frame_of[parent_name])
-        frame_of[child] = len(frame_names)
-        frame_names.append(child)
-        all_names.append(jname)
-        mimic = spec.get("mimic")
-        if mimic is not None:
-            if kind == "fixed":
-                raise ModelError(
-                    f"{where} is fixed but has a mimic; only revolute and prismatic joints "
-                    "can mimic another joint."
-                )
-            mimics[jname] = _mimic_spec(mimic, where)
-        if kind != "fixed":
-            lo = _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'")
-            hi = _limit(spec.get("upper", math.inf), f"{where}, key 'upper'")
-            if lo > hi:
-                raise ModelError(f"{where}: lower limit {lo} is above upper limit {hi}.")
-        limits[jname] = (lo, hi) if kind != "fixed" else None
+    specs = [_joint_spec(spec, j, frame_names, frame_of) for j, spec in enumerate(joints)]
+    all_names = [s.name for s in specs]
     _check_unique(all_names, "joint name")
-    kind_of = dict(zip(all_names, kinds, strict=True))
-    for spec in leaders:  # outside the structure: kinds, limits and mimics only
-        lname = str(spec["name"])
-        lkind = spec["type"]
-        if lname in kind_of or lkind not in ("revolute", "prismatic"):
-            raise ModelError(f"leader joint {lname!r} must be a new revolute or prismatic joint.")
-        kind_of[lname] = lkind
-        where = f"leader joint {lname!r}"
-        limits[lname] = (
-            _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'"),
-            _limit(spec.get("upper", math.inf), f"{where}, key 'upper'"),
-        )
-        if spec.get("mimic") is not None:
-            mimics[lname] = _mimic_spec(spec["mimic"], where)
-    try:
-        resolved = resolve_mimics(mimics, kind_of)
-    except MimicError as e:
-        raise ModelError(str(e)) from None
-    q_of: dict[str, int] = {}  # independent joint name -> index into q
-    for jname, kind in zip(all_names, kinds, strict=True):
-        driver = resolved[jname][0] if jname in resolved else jname
-        if kind != "fixed" and driver not in q_of and (driver == jname or driver not in all_names):
-            q_of[driver] = len(q_of)
-    n = len(kinds)
-    multiplier, offset, q_index = [1.0] * n, [0.0] * n, [-1] * n
-    for j, (jname, kind) in enumerate(zip(all_names, kinds, strict=True)):
-        if kind == "fixed":
-            continue
-        driver, multiplier[j], offset[j] = resolved.get(jname, (jname, 1.0, 0.0))
-        q_index[j] = q_of[driver]
-    joint_names = list(q_of)
-    lowers = [limits[k][0] for k in joint_names]
-    uppers = [limits[k][1] for k in joint_names]
-    if not joint_names:
-        raise ModelError("the robot has no moving joint (all joints are fixed).")
+    kinds = [s.kind for s in specs]
+    xyz = [s.xyz for s in specs]
+    rpy = [s.rpy for s in specs]
+    axes = [s.axis for s in specs]
+    parents = [s.parent for s in specs]
+    q_index, multiplier, offset, joint_names, lowers, uppers = _drive(specs, leaders)
     params = {
         "xyz": jnp.asarray(np.array(xyz), dtype=dt),
         "rpy": jnp.asarray(np.array(rpy), dtype=dt),
@@ -344,6 +248,133 @@ def from_joints(
         dtype=dt,
         default_frames=default_frames,
     )
+
+
+_JOINT_KEYS = {"name", "type", "child", "parent", "xyz", "rpy", "axis", "lower", "upper", "mimic"}
+
+
+class _Joint(NamedTuple):
+    """One validated joint spec of :func:`from_joints`."""
+
+    name: str
+    kind: str
+    parent: int  # frame index
+    xyz: np.ndarray
+    rpy: np.ndarray
+    axis: np.ndarray
+    limits: tuple[float, float] | None  # None for fixed joints
+    mimic: tuple[str, float, float] | None
+
+
+def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
+    """Validate joint ``j``'s spec and register the frame it moves (appended to the lists)."""
+    _check_keys(
+        spec,
+        f"joint {j}",
+        _JOINT_KEYS,
+        ("name", "type", "child"),
+        "every joint needs name, type, child",
+    )
+    jname = str(spec["name"])
+    where = f"joint {jname!r}"
+    kind = spec["type"]
+    if kind not in JOINT_KINDS:
+        raise ModelError(
+            f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic' or 'fixed'."
+        )
+    parent_name = spec.get("parent", frame_names[-1])
+    if not isinstance(parent_name, str) or parent_name not in frame_of:
+        shown = frame_names if len(frame_names) <= 20 else [*frame_names[:20], "..."]
+        raise ModelError(
+            f"{where}: parent frame {parent_name!r} is not defined by an earlier joint "
+            f"(known frames: {shown}). List parents before children."
+        )
+    child = str(spec["child"])
+    if child in frame_of:
+        raise ModelError(f"{where}: frame {child!r} already has a parent.")
+    frame_of[child] = len(frame_names)
+    frame_names.append(child)
+    mimic, limits = spec.get("mimic"), None
+    if mimic is not None:
+        if kind == "fixed":
+            raise ModelError(
+                f"{where} is fixed but has a mimic; only revolute and prismatic joints "
+                "can mimic another joint."
+            )
+        mimic = _mimic_spec(mimic, where)
+    if kind != "fixed":
+        limits = _limits(spec, where)
+    return _Joint(
+        name=jname,
+        kind=kind,
+        parent=frame_of[parent_name],
+        xyz=_vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'"),
+        rpy=_vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'"),
+        axis=_unit_axis(spec.get("axis", (1.0, 0.0, 0.0)), kind, where),
+        limits=limits,
+        mimic=mimic,
+    )
+
+
+def _unit_axis(value: Any, kind: str, where: str) -> np.ndarray:
+    ax = _vector3(value, f"{where}, key 'axis'")
+    # Overflow- and underflow-safe norm (math.hypot scales internally).
+    norm = math.hypot(*(float(x) for x in ax))
+    if kind != "fixed" and norm == 0.0:
+        raise ModelError(f"{where} has a zero axis; give a non-zero direction.")
+    if norm == 0.0:
+        return np.array([1.0, 0.0, 0.0])
+    if abs(norm - 1.0) > 4 * np.finfo(np.float64).eps:
+        return ax / norm  # a unit axis (to rounding) is kept bit for bit: idempotent
+    return ax
+
+
+def _limits(spec: Mapping[str, Any], where: str) -> tuple[float, float]:
+    lo = _limit(spec.get("lower", -math.inf), f"{where}, key 'lower'")
+    hi = _limit(spec.get("upper", math.inf), f"{where}, key 'upper'")
+    if lo > hi:
+        raise ModelError(f"{where}: lower limit {lo} is above upper limit {hi}.")
+    return lo, hi
+
+
+def _drive(joints: list[_Joint], leaders: Sequence[Mapping[str, Any]]):
+    """Which entry of ``q`` drives each joint, and how: ``(q_index, multiplier, offset,
+    joint_names, lower, upper)``. Independent joints get entries in order; mimic joints are
+    resolved once (:func:`resolve_mimics`); a leader outside the structure (``leaders``) that
+    ends a mimic chain gets the entry where its first follower is."""
+    kind_of = {j.name: j.kind for j in joints}
+    limits = {j.name: j.limits for j in joints}
+    mimics = {j.name: j.mimic for j in joints if j.mimic is not None}
+    for spec in leaders:  # outside the structure: kinds, limits and mimics only
+        lname, lkind = str(spec["name"]), spec["type"]
+        if lname in kind_of or lkind not in ("revolute", "prismatic"):
+            raise ModelError(f"leader joint {lname!r} must be a new revolute or prismatic joint.")
+        kind_of[lname] = lkind
+        limits[lname] = _limits(spec, f"leader joint {lname!r}")
+        if spec.get("mimic") is not None:
+            mimics[lname] = _mimic_spec(spec["mimic"], f"leader joint {lname!r}")
+    try:
+        resolved = resolve_mimics(mimics, kind_of)
+    except MimicError as e:
+        raise ModelError(str(e)) from None
+    inside = {j.name for j in joints}
+    q_of: dict[str, int] = {}  # independent joint name -> index into q
+    for j in joints:
+        driver = resolved[j.name][0] if j.name in resolved else j.name
+        if j.kind != "fixed" and driver not in q_of and (driver == j.name or driver not in inside):
+            q_of[driver] = len(q_of)
+    n = len(joints)
+    multiplier, offset, q_index = [1.0] * n, [0.0] * n, [-1] * n
+    for i, j in enumerate(joints):
+        if j.kind != "fixed":
+            driver, multiplier[i], offset[i] = resolved.get(j.name, (j.name, 1.0, 0.0))
+            q_index[i] = q_of[driver]
+    names = list(q_of)
+    if not names:
+        raise ModelError("the robot has no moving joint (all joints are fixed).")
+    lower = [limits[k][0] for k in names]
+    upper = [limits[k][1] for k in names]
+    return q_index, multiplier, offset, names, lower, upper
 
 
 def _build(
