@@ -1163,7 +1163,11 @@ def _jacobian_header(robot, frame, q, reference, representation, point) -> list[
             "R = Rz(phi) Ry(theta) Rz(psi)",
             "rotvec": "analytical Jacobian d[p; w]/dq, w the rotation vector (R = exp(skew(w)))",
         }[representation] + f"; p = {at}, world axes"
-    tip = " (the tip)" if robot.frame_index(frame) == robot.tip_frame else ""
+    tip = (
+        " (the tip)"
+        if robot.has_default_frame and robot.frame_index(frame) == robot.tip_frame
+        else ""
+    )
     units = ["rad" if k == "revolute" else "m" for k in robot.joint_kinds]
     q_text = ", ".join(
         f"{n}={v:g} {u}" for n, v, u in zip(robot.joint_names, q, units, strict=True)

@@ -720,3 +720,16 @@ def test_streams_results_to_disk(capsys, monkeypatch, in_tmp):
 
 def load_csv_rows(path):
     return [line for line in path.read_text().splitlines() if not line.startswith("#")][1:]
+
+
+def test_jacobian_of_a_branching_urdf_with_an_explicit_frame(capsys, in_tmp):
+    # arm + two fingers: no default frame, but --frame names one; the CLI must not ask for
+    # the default just to label the output
+    from test_default_frame import FINGERS
+
+    (in_tmp / "fingers.urdf").write_text(FINGERS)
+    code, out, _ = run(capsys, "jacobian", "fingers.urdf", "--frame", "finger_l", "--q", *["0"] * 5)
+    assert code == 0, out
+    assert "finger_l" in out and "(the tip)" not in out
+    code, _, err = run(capsys, "jacobian", "fingers.urdf", "--q", *["0"] * 5)
+    assert code == 2 and "finger_l" in err and "finger_r" in err
