@@ -37,6 +37,7 @@ from .derivatives import kinematic_hessian as kinematic_hessian
 from .errors import JaxkinError as JaxkinError
 from .errors import JaxkinPrecisionWarning as JaxkinPrecisionWarning
 from .errors import ModelError as ModelError
+from .errors import NoDefaultFrameError as NoDefaultFrameError
 from .errors import RepresentationSingularityError as RepresentationSingularityError
 from .errors import ShapeError as ShapeError
 from .errors import UnknownRobotError as UnknownRobotError

@@ -7,6 +7,8 @@ Messages say what was expected, what was given, and how to fix it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 
 class JaxkinError(ValueError):
     """Base class of all errors raised by jaxkin for bad input."""
@@ -18,6 +20,20 @@ class ModelError(JaxkinError):
 
 class ShapeError(JaxkinError):
     """An array argument has the wrong shape or dtype."""
+
+
+class NoDefaultFrameError(ModelError):
+    """A function was asked for the robot's default frame (``frame=None``) but the robot has
+    none: its moving joints branch (arm + gripper fingers, a humanoid), so no frame is moved by
+    all of them. ``candidates`` holds the end frames of the branches; pass one as ``frame=``, or
+    load the chain to one with ``jk.load_urdf(path, tip=...)``."""
+
+    def __init__(self, message: str, robot: str = "", candidates: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.robot, self.candidates = robot, tuple(candidates)
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.robot, self.candidates))
 
 
 class UnknownRobotError(JaxkinError):

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import ModelError
+from .errors import ModelError, NoDefaultFrameError
 
 __all__ = ["JOINT_KINDS", "PARAMETERISATIONS", "NoDefaultFrameError", "Params", "Robot"]
 
@@ -41,20 +41,6 @@ PARAMETERISATIONS = ("dh_standard", "dh_modified", "placement")
 
 _LEAF = {"leaf": True}  # field metadata: a float-array pytree leaf
 _STRUCTURE = {"leaf": False}  # field metadata: a hashable Python value, part of the structure
-
-
-class NoDefaultFrameError(ModelError):
-    """A function was asked for the robot's default frame (``frame=None``) but the robot has
-    none: its moving joints branch (arm + gripper fingers, a humanoid), so no frame is moved by
-    all of them. ``candidates`` holds the end frames of the branches; pass one as ``frame=``, or
-    load the chain to one with ``jk.load_urdf(path, tip=...)``."""
-
-    def __init__(self, message: str, robot: str = "", candidates: Sequence[str] = ()) -> None:
-        super().__init__(message)
-        self.robot, self.candidates = robot, tuple(candidates)
-
-    def __reduce__(self):
-        return (type(self), (str(self), self.robot, self.candidates))
 
 
 def _as_leaf(x: Any) -> Any:

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin.model import NoDefaultFrameError
+from jaxkin import NoDefaultFrameError
 from jaxkin.robots import example_robot_data as erd
 from jaxkin.urdf import MOVING_TYPES, parse_urdf
 
