@@ -2,7 +2,7 @@
 
 The check of a solution is independent of the solver: numpy on ``jk.fk``'s pose, position error
 ``|p - p*|`` and the rotation angle of ``R* R^T`` (from its trace and skew part), both <= 1e-9
-(ORACLES.md: converged IK pose, float64), and the joints within their limits.
+(tests/README.md: converged IK pose, float64), and the joints within their limits.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import jaxkin as jk
 from jaxkin.ik import RESULTS
 
 N_TARGETS = 300
-SEEDS = 16
+SEEDS = jk.ik.DEFAULT_NUM_SEEDS
 
 
 def _pose_errors(T: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +45,7 @@ def test_round_trip_random_reachable_targets(name):
     q_star = sample_configurations(robot, N_TARGETS, 1)
     q0 = sample_configurations(robot, N_TARGETS, 2)  # a random start, not the answer
     T_target = np.asarray(_fk_batch(robot, jnp.asarray(q_star)))
-    sol = jk.solve_ik(robot, T_target, q0, num_seeds=SEEDS, key=jax.random.key(3), throw=False)
+    sol = jk.solve_ik(robot, T_target, q0, key=jax.random.key(3), throw=False)  # default starts
     sol = jax.tree_util.tree_map(np.asarray, sol)
     ok = sol.converged
     assert ok.mean() >= 0.99, (name, ok.mean(), np.bincount(sol.result))
@@ -115,9 +115,13 @@ def test_stalled_when_the_pose_is_outside_the_workspace():
     planar = jk.robots.load("two_link_planar", dtype=np.float64)
     T = np.eye(4)
     T[:3, 3] = [1.0, 0.5, 0.3]  # within reach (2 m) but out of the arm's plane
-    sol = jk.solve_ik(planar, T, np.array([0.1, 0.2]), throw=False, max_steps=200)
+    sol = jk.solve_ik(planar, T, np.array([0.1, 0.2]), throw=False, max_steps=200, num_seeds=1)
     assert int(sol.result) == RESULTS.stalled
     assert int(sol.steps) < 200  # gave up early, did not loop to the budget
+    # by default every restart stalls too, each well before its budget
+    sol = jk.solve_ik(planar, T, np.array([0.1, 0.2]), throw=False, max_steps=200)
+    assert int(sol.result) == RESULTS.stalled
+    assert int(sol.steps) < jk.ik.DEFAULT_NUM_SEEDS * 200 // 2
     assert np.all(np.isfinite(np.asarray(sol.q)))
     # no configuration gets closer than the 0.3 m out of the arm's plane
     assert float(sol.position_error) >= 0.3 - 1e-12
