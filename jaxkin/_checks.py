@@ -67,6 +67,14 @@ class FiniteGuard:
     def __init__(self, bad: Any):
         self.bad = bad
 
+    def clean(self, x: Any) -> Any:
+        """``x`` with its non-finite entries replaced by 0 when traced (eagerly ``x`` itself), for
+        kernels that must not see them: LAPACK's SVD can loop forever on inf. The result computed
+        from it is then poisoned by calling the guard."""
+        if self.bad is False:
+            return x
+        return jnp.where(jnp.isfinite(x), x, jnp.zeros_like(x))
+
     def __call__(self, value: Any) -> Any:
         bad = self.bad
         if bad is False:

@@ -34,7 +34,7 @@ public function of :mod:`jaxkin.analysis`, :mod:`jaxkin.inverse_velocity`,
   :class:`~jaxkin.JaxkinError` naming the argument that holds NaN or inf, before computing;
 * under a trace (``jit``, ``vmap``, ``grad``), where values cannot raise, the result of a call
   (of each item, under ``vmap``) with a non-finite input is poisoned: floating-point values are
-  NaN (derivatives through them too), boolean flags are True ("possibly singular"), integer
+  NaN, boolean flags are True ("possibly singular"), integer
   counts (:func:`rank`, ``DependentColumns.nullity``) are the sentinel -1, and convergence flags
   (``converged`` of :func:`jaxkin.calibrate`) are False ("not converged");
 * host-side results (Python strings and lists: :func:`jaxkin.classify_twist`,
@@ -131,6 +131,7 @@ def _guarded(J: Any, rows: Any, fn: str, **others: Any):
     Jc = check_J(J, fn)
     idx = _row_indices(rows, Jc.shape[0], fn)
     guard = finite_guard(fn, J=Jc, **others)
+    Jc = guard.clean(Jc)
     return (Jc if idx is None else Jc[jnp.array(idx)]), guard
 
 
@@ -344,6 +345,7 @@ def manipulability_gradient(
     # Validate rows eagerly (shape 6).
     idx = _row_indices(rows, 6, fn)
     guard = finite_guard(fn, q=q, point=pt)
+    q, pt = guard.clean(q), None if pt is None else guard.clean(pt)
 
     def m(qq):
         J = jacobian_pass(robot, qq, f, pt, reference).matrix()
@@ -420,6 +422,7 @@ def joint_torques(J: Any, wrench: Any) -> jax.Array:
             f"([f; n] for a 6-row Jacobian), got {F.shape}. Batch with jax.vmap."
         )
     guard = finite_guard(fn, J=J, wrench=F)
+    J, F = guard.clean(J), guard.clean(F)
     return guard(J.T @ F.astype(J.dtype))
 
 
@@ -504,6 +507,7 @@ def wrist_centre(robot: Robot, q: Any, wrist_joints: Sequence[int | str] | None 
     _, _, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
     guard = finite_guard(fn, q=q)
+    q = guard.clean(q)
     return guard(_wrist_centre(forward_pass(robot, q), wrist_model))
 
 
@@ -565,6 +569,7 @@ def wrist_decoupling(
     arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
     q = check_q(robot, q, fn=fn)
     guard = finite_guard(fn, q=q, threshold=threshold)
+    q = guard.clean(q)
     J = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned").matrix()
     fp = forward_pass(robot, q)  # joint axes and origins, shared with the wrist centre
     p = fp.p[robot.frame_index(frame)]

@@ -418,6 +418,7 @@ def calibrate(
     masks = _masks(robot, params)
     f = robot.frame_index(frame)
     qs, Ts, guard = _check_data(robot, qs, Ts_measured, fn)
+    qs, Ts = guard.clean(qs), guard.clean(Ts)
     if not (position_sigma > 0 and orientation_sigma > 0):
         raise JaxkinError(f"{fn}: position_sigma and orientation_sigma must be > 0.")
     if not tol >= 0:

@@ -137,6 +137,7 @@ def pinv_velocity(
     guard = finite_guard(
         fn, J=J, v=v, rcond=rcond, joint_weights=joint_weights, task_weights=task_weights
     )
+    J, v = guard.clean(J), guard.clean(v)
     Jt, vt, back = _apply_weights(J, v, Wx, Wq)
     return guard(back(jnp.linalg.pinv(Jt, rtol=rcond) @ vt))
 
@@ -191,6 +192,7 @@ def damped_least_squares(
     guard = finite_guard(
         fn, J=J, v=v, damping=lam, joint_weights=joint_weights, task_weights=task_weights
     )
+    J, v = guard.clean(J), guard.clean(v)
     if not is_traced(lam) and not float(lam) >= 0.0:
         raise JaxkinError(f"{fn}: damping must be >= 0, got {float(lam)}.")
     Jt, vt, back = _apply_weights(J, v, Wx, Wq)
@@ -213,6 +215,7 @@ def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Arr
     if J.ndim != 2:
         raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
     guard = finite_guard(fn, J=J, max_damping=max_damping, threshold=threshold)
+    J = guard.clean(J)
     if not threshold > 0 or not max_damping >= 0:
         raise JaxkinError(
             "jk.adaptive_damping: threshold must be > 0 and max_damping >= 0, got "
@@ -258,6 +261,7 @@ def null_space_projector(J: Any, *, rcond: float | None = None, damping: Any = N
     if J.ndim != 2:
         raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
     guard = finite_guard(fn, J=J, rcond=rcond, damping=damping)
+    J = guard.clean(J)
     Jp = _generalised_inverse(J, rcond, damping, fn)
     return guard(jnp.eye(J.shape[1], dtype=J.dtype) - Jp @ J)
 
@@ -286,6 +290,7 @@ def null_space_velocity(
             f"{fn}: qd_secondary must have shape ({J.shape[1]},) (one per joint), got {qd0.shape}."
         )
     guard = finite_guard(fn, J=J, v=v, qd_secondary=qd0, rcond=rcond, damping=damping)
+    J, v, qd0 = guard.clean(J), guard.clean(v), guard.clean(qd0)
     Jp = _generalised_inverse(J, rcond, damping, fn)
     return guard(Jp @ v + qd0 - Jp @ (J @ qd0))
 
@@ -417,9 +422,9 @@ def resolved_rate_control(
     )
     out = _resolved_rate(
         robot,
-        q0.astype(dtype),
-        Ts,
-        Vs,
+        guard.clean(q0.astype(dtype)),
+        guard.clean(Ts),
+        None if Vs is None else guard.clean(Vs),
         dt_a,
         jnp.asarray(gain, dtype=dtype),
         jnp.asarray(0.0 if damping is None else damping, dtype=dtype),

@@ -167,3 +167,64 @@ def test_batched_over_datasets_with_vmap():
     np.testing.assert_allclose(np.asarray(fitted), true_a, rtol=0, atol=1e-9)
     with pytest.raises(jk.JaxkinError, match="check_identifiable=False"):
         jax.vmap(lambda q, T: jk.calibrate(nominal, q, T, free).params["a"])(jnp.asarray(qs), Ts)
+
+
+# ----------------------------------------------------------------------------- refused data, status
+def _planar_data(m=10, seed=6):
+    robot = jk.robots.load("two_link_planar", dtype=np.float64)
+    qs = sample_configurations(robot, m, seed)
+    true = robot.replace(params={**robot.params, "a": robot.params["a"] * 1.01})
+    return robot, qs, _measure(true, qs, None)
+
+
+def test_refuses_empty_transposed_and_nonfinite_measurements():
+    robot, qs, Ts = _planar_data()
+    with pytest.raises(jk.JaxkinError, match="no measurements"):
+        jk.calibrate(robot, qs[:0], Ts[:0], ["a"])
+    with pytest.raises(jk.JaxkinError, match="no measurements"):
+        jk.identifiability(robot, qs[:0], ["a"])
+    # transposed poses: the rotation block is still orthonormal but the translation sits in the
+    # last row, so the offsets would be fitted to nonsense
+    with pytest.raises(jk.JaxkinError, match=r"Ts_measured\[0\] is not a rigid transform"):
+        jk.calibrate(robot, qs, jnp.swapaxes(Ts, 1, 2), ["a", "offset"], check_identifiable=False)
+    with pytest.raises(jk.JaxkinError, match="Ts_measured contains NaN or inf"):
+        jk.calibrate(robot, qs, Ts.at[3, 0, 3].set(jnp.inf), ["a"])
+    with pytest.raises(jk.JaxkinError, match="qs contains NaN or inf"):
+        jk.calibrate(robot, np.where(np.arange(qs.size).reshape(qs.shape) == 5, np.nan, qs), Ts,
+                     ["a"])  # fmt: skip
+    with pytest.raises(jk.JaxkinError, match="qs contains NaN or inf"):
+        jk.identifiability(robot, np.full_like(qs, np.nan), ["a"])
+
+
+def test_status_nan_loss_step_budget_and_unidentifiable():
+    import optax
+
+    robot, qs, Ts = _planar_data()
+    res = jk.calibrate(robot, qs, Ts, ["a"])
+    assert bool(res.converged) and bool(res.identifiable)
+    # an optimiser whose step is NaN: the loss becomes NaN, which is not convergence
+    nan_step = optax.with_extra_args_support(
+        optax.stateless(lambda g, p: jax.tree_util.tree_map(lambda x: x * jnp.nan, g))
+    )
+    res = jk.calibrate(robot, qs, Ts, ["a"], optimizer=nan_step)
+    assert np.isnan(np.asarray(res.loss_history)).any() and not bool(res.converged)
+    # the step budget runs out before the loss settles
+    res = jk.calibrate(robot, qs, Ts, ["a"], max_steps=2)
+    assert int(res.steps) == 2 and not bool(res.converged)
+    # both joint zeros and the base yaw: unidentifiable, fitted anyway when asked, and reported
+    free = {"offset": np.array([True, True]), "base": np.array([False] * 5 + [True])}
+    res = jk.calibrate(robot, qs, Ts, free, check_identifiable=False)
+    assert not bool(res.identifiable)
+
+
+def test_under_jit_nonfinite_data_do_not_converge():
+    robot, qs, Ts = _planar_data()
+    fit = jax.jit(lambda q, T: jk.calibrate(robot, q, T, ["a"], check_identifiable=False))
+    good = fit(jnp.asarray(qs), Ts)
+    assert bool(good.converged)
+    np.testing.assert_allclose(np.asarray(good.params["a"]), np.asarray(robot.params["a"]) * 1.01,
+                               rtol=0, atol=1e-9)  # fmt: skip
+    for q, T in ((jnp.asarray(qs).at[2, 1].set(jnp.nan), Ts), (qs, Ts.at[0, 1, 3].set(jnp.inf))):
+        res = fit(jnp.asarray(q), T)
+        assert not bool(res.converged) and not bool(res.identifiable)
+        assert np.all(np.isnan(np.asarray(res.params["a"])))
