@@ -1,0 +1,184 @@
+"""``jk.solve_ik`` with default arguments reaches what a TRAC-IK user expects, and its caches are
+keyed by the robot's value.
+
+TRAC-IK, from one user seed with internal random restarts, solves 99.7% of random reachable Panda
+targets at 1e-5. Here: 200 random reachable targets (random configurations within the limits,
+then ``jk.fk``) per arm, one start at the middle of the limits, ``jk.solve_ik(robot, T, q0)``
+with nothing else but ``throw=False``; at most one failure in 200 (>= 99.5%) at the default
+tolerance. Every solution is checked independently of the solver: numpy on ``jk.fk``'s pose
+(position error and the rotation angle of ``R* R^T``, both <= tol) and the joint limits.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxkin as jk
+from jaxkin.ik import RESULTS
+
+N_TARGETS = 200
+TOL = 1e-10  # solve_ik's default tolerance in float64
+SLACK = 1e-14  # rounding of the numpy recomputation
+
+# Explicit tips: erd's default frames of these files are fingers or a frame beside the chain.
+ARMS = {
+    "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
+    "ur5": lambda: jk.robots.load("erd/ur5_robot", tip="tool0"),
+    "ur10": lambda: jk.robots.load("erd/ur10_robot", tip="tool0"),
+    "kinova": lambda: jk.robots.load("erd/kinova", tip="j2s6s200_end_effector"),
+    "niryo_one": lambda: jk.robots.load("niryo_one"),
+}
+DOF = {"panda": 7, "ur5": 6, "ur10": 6, "kinova": 6, "niryo_one": 6}
+
+
+def _load(name: str) -> jk.Robot:
+    if name != "niryo_one" and "erd/panda" not in jk.robots.erd_names():
+        pytest.skip("example-robot-data is not installed")
+    robot = ARMS[name]()
+    assert robot.dof == DOF[name], (name, robot.dof, robot.joint_names)
+    return robot
+
+
+def _poses(robot: jk.Robot, qs) -> np.ndarray:
+    return np.stack([np.asarray(jk.fk(robot, q)) for q in np.asarray(qs)])
+
+
+def _pose_errors(T: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position error (m) and rotation angle of ``R_target R^T`` (rad), numpy only."""
+    dp = np.linalg.norm(T[..., :3, 3] - T_target[..., :3, 3], axis=-1)
+    M = T_target[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2)
+    axis = np.stack(
+        [M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0], M[..., 1, 0] - M[..., 0, 1]], -1
+    )
+    s = 0.5 * np.linalg.norm(axis, axis=-1)
+    c = 0.5 * (np.trace(M, axis1=-2, axis2=-1) - 1.0)
+    return dp, np.arctan2(s, c)
+
+
+def _reached(robot: jk.Robot, q: np.ndarray, T_target: np.ndarray, tol: float = TOL) -> np.ndarray:
+    """Per solution: pose within tol (checked on jk.fk with numpy) and joints within limits."""
+    dp, dw = _pose_errors(_poses(robot, q), T_target)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    within = np.all((q >= lo) & (q <= hi), axis=-1)
+    return (dp <= tol + SLACK) & (dw <= tol + SLACK) & within
+
+
+def _targets(robot: jk.Robot, n: int, key: int):
+    q_star = np.asarray(jk.sample_configurations(robot, n, jax.random.key(key)))
+    return q_star, _poses(robot, q_star)
+
+
+def _mid_limits(robot: jk.Robot) -> np.ndarray:
+    lo, hi = jk.sampling_bounds(robot)  # finite: continuous joints count as [-pi, pi]
+    return 0.5 * (np.asarray(lo) + np.asarray(hi))
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_default_call_reaches_random_reachable_targets(name):
+    robot = _load(name)
+    _, T = _targets(robot, N_TARGETS, 1)
+    sol = jk.solve_ik(robot, T, _mid_limits(robot), throw=False)  # defaults only
+    sol = jax.tree_util.tree_map(np.asarray, sol)
+    ok = _reached(robot, sol.q, T)
+    failures = int(np.sum(~ok))
+    assert failures <= 1, (name, failures, np.bincount(sol.result, minlength=len(RESULTS)))
+    # honest flags: converged exactly where the independent check says so, codes as documented
+    np.testing.assert_array_equal(sol.converged, ok)
+    assert np.all(sol.result[ok] == RESULTS.converged)
+    assert np.all(np.isin(sol.result[~ok], [RESULTS.max_steps_reached, RESULTS.stalled]))
+    assert np.all(sol.residual[ok] <= TOL)
+    # a bounded budget, restarts included
+    assert np.all(sol.seed < jk.ik.DEFAULT_NUM_SEEDS) and np.all(sol.seed >= 0)
+    assert np.all(sol.steps <= jk.ik.DEFAULT_NUM_SEEDS * 30)
+
+
+def test_num_seeds_1_is_exactly_one_start():
+    robot = _load("panda")
+    _, T = _targets(robot, N_TARGETS, 2)
+    q0 = _mid_limits(robot)
+    for max_steps in (30, 7):  # max_steps is traced: one compile for both
+        sol = jk.solve_ik(robot, T, q0, num_seeds=1, max_steps=max_steps, throw=False)
+        sol = jax.tree_util.tree_map(np.asarray, sol)
+        assert np.all(sol.seed == 0)
+        assert np.all(sol.steps <= max_steps), sol.steps.max()
+        ok = _reached(robot, sol.q, T)
+        np.testing.assert_array_equal(sol.converged, ok)
+        assert np.all(np.isin(sol.result[~ok], [RESULTS.max_steps_reached, RESULTS.stalled]))
+    # one start does fail on some of these targets (the defaults' restarts are what reach them)
+    assert 0 < np.sum(~ok) < N_TARGETS
+
+
+def test_explicit_seeds_are_the_only_starts():
+    planar = jk.robots.load("two_link_planar", dtype=np.float64)
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 0.5, 0.3]  # within reach but out of the arm's plane: every start stalls
+    q0 = np.array([0.1, 0.2])
+    seeds = np.array([[1.0, -0.5], [-2.0, 1.0]])
+    sol = jk.solve_ik(planar, T, q0, seeds=seeds, max_steps=200, throw=False)
+    assert int(sol.result) == RESULTS.stalled and int(sol.seed) in (0, 1, 2)
+    assert int(sol.steps) <= 3 * 200
+    # while the default keeps restarting (64 starts), within its bound
+    many = jk.solve_ik(planar, T, q0, max_steps=200, throw=False)
+    assert int(many.result) == RESULTS.stalled
+    assert 3 * 200 < int(many.steps) <= jk.ik.DEFAULT_NUM_SEEDS * 200
+
+
+# A small spatial arm (z, y, y axes, then a tool offset), written to a file by the test.
+ARM_URDF = """<robot name="arm3">
+  <link name="l0"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="l0"/><child link="l1"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0 0.1 0"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/>
+  </joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0.4 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2.5" upper="2.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="tool" type="fixed"><parent link="l3"/><child link="tip"/>
+    <origin xyz="0.3 0 0"/>
+  </joint>
+</robot>
+"""
+
+
+def test_cache_is_keyed_by_the_robots_value(tmp_path):
+    path = tmp_path / "arm3.urdf"
+    path.write_text(ARM_URDF)
+    a = jk.load_urdf(path, dtype=np.float64)
+    b = jk.load_urdf(str(path), dtype=np.float64)
+    assert a is not b and a == b and a.dof == 3
+    # a changed link parameter: the second link lengthened by 5 cm
+    xyz = a.params["xyz"]
+    i = a.joint_names.index("j3")
+    c = a.replace(params={**a.params, "xyz": xyz.at[i, 0].add(0.05)})
+    assert c != a and np.asarray(a.params["xyz"])[i, 0] == 0.4
+
+    jitted = jk.ik._solve_batch.get_jitted()
+    q_star = np.asarray(jk.sample_configurations(a, 8, jax.random.key(4)))
+    T_a = _poses(a, q_star)
+    T_c = _poses(c, q_star)
+    q0 = _mid_limits(a)
+    before = jitted._cache_size()
+    sol_a = jk.solve_ik(a, T_a, q0)
+    assert jitted._cache_size() == before + 1
+    assert np.all(_reached(a, np.asarray(sol_a.q), T_a))
+    # an equal robot from the same file: no new compile, the same answers
+    sol_b = jk.solve_ik(b, T_a, q0)
+    assert jitted._cache_size() == before + 1
+    np.testing.assert_array_equal(np.asarray(sol_b.q), np.asarray(sol_a.q))
+    # the changed robot compiles once and solves for itself, not for the cached one
+    sol_c = jk.solve_ik(c, T_c, q0)
+    assert jitted._cache_size() == before + 2
+    q_c = np.asarray(sol_c.q)
+    assert np.all(_reached(c, q_c, T_c))
+    dp_old, _ = _pose_errors(_poses(a, q_c), T_c)
+    assert np.all(dp_old > 1e-3)  # on the old robot these answers miss: the test discriminates
+    # and the old robot's entry still answers for the old robot
+    sol_a2 = jk.solve_ik(jk.load_urdf(path, dtype=np.float64), T_a, jnp.asarray(q0))
+    assert jitted._cache_size() == before + 2
+    np.testing.assert_array_equal(np.asarray(sol_a2.q), np.asarray(sol_a.q))
