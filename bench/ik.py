@@ -98,7 +98,9 @@ class Judge:
 
 # ----------------------------------------------------------------------------- solvers
 def run_jaxkin(robot, Ts, seeds, repeats: int) -> dict[str, Any]:
-    kw = dict(q0=seeds[0], seeds=seeds[1:] if len(seeds) > 1 else None, throw=False)
+    # exactly the shared starts: the given seeds, or q0 alone (num_seeds=1: no default restarts)
+    extra = {"seeds": seeds[1:]} if len(seeds) > 1 else {"num_seeds": 1}
+    kw = dict(q0=seeds[0], throw=False, **extra)
 
     def solve():
         sol = jk.solve_ik(robot, Ts, **kw)
