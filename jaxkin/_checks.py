@@ -26,6 +26,7 @@ from .errors import JaxkinError, ShapeError
 from .model import Robot
 
 REFERENCES = ("world_aligned", "local", "world")
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 # ----------------------------------------------------------------------------- traces
@@ -116,8 +117,9 @@ def finite_guard(fn: str, **inputs: Any) -> FiniteGuard:
 
 # ----------------------------------------------------------------------------- dtypes and math
 def result_dtype(robot: Robot, *arrays: Any) -> np.dtype:
-    """The float dtype of a computation on ``robot`` and ``arrays``: float32 only if all are."""
-    return np.dtype(jnp.result_type(robot.base.dtype, *(a.dtype for a in arrays)))
+    """The float dtype of a computation on ``robot`` and float ``arrays``: float32 only if all
+    are (numpy's promotion, which equals JAX's for float32/float64 and is much cheaper)."""
+    return np.result_type(robot.base.dtype, *(a.dtype for a in arrays))
 
 
 def safe_norm(x: jax.Array, axis: Any = None) -> jax.Array:
@@ -163,6 +165,13 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", ba
     q))(qs)``); it must run when pasted.
     """
     check_robot(robot, fn)
+    if (
+        isinstance(q, jax.Array)
+        and not isinstance(q, jax.core.Tracer)
+        and q.shape == (robot.dof,)
+        and q.dtype in _FLOATS
+    ):
+        return q  # the common case, fast: eager calls must not cost milliseconds
     q = _as_array(q, what, fn, "an array of numbers")
     _numeric(q, what, fn)
     shape = tuple(q.shape)
@@ -170,7 +179,8 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", ba
         hint = ""
         if len(shape) >= 2 and shape[-1] == robot.dof:
             code = batch_hint or f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
-            hint = f" For a batch of configurations use jax.vmap, e.g. {code}."
+            how = "use jax.vmap, e.g." if code.startswith("jax.vmap") else "use, e.g."
+            hint = f" For a batch of configurations {how} {code}."
         elif len(shape) == 1:
             hint = f" Give one value per joint {list(robot.joint_names)}."
         raise ShapeError(

@@ -125,10 +125,11 @@ def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
     )
 
 
-def _guarded(J: Any, rows: Any, fn: str, **others: Any):
+def _guarded(J: Any, rows: Any, fn: str, batch_hint: str | None = None, **others: Any):
     """The selected rows of the checked ``J`` and the non-finite guard of ``J`` and ``others``
-    (module doc, "Non-finite input"): the guard checks all of J, not only the selected rows."""
-    Jc = check_J(J, fn)
+    (module doc, "Non-finite input"): the guard checks all of J, not only the selected rows.
+    ``batch_hint``: the code suggested for a batch of Jacobians (see ``check_J``)."""
+    Jc = check_J(J, fn, batch_hint)
     idx = _row_indices(rows, Jc.shape[0], fn)
     guard = finite_guard(fn, J=Jc, **others)
     Jc = guard.clean(Jc)
@@ -187,7 +188,8 @@ def rank(J: Any, rows: Any = "all", *, rtol: float | None = None, atol: float = 
     Non-finite ``J``, ``rtol`` or ``atol`` (module doc): raises eagerly; under a trace the rank
     is the sentinel -1.
     """
-    Jr, guard = _guarded(J, rows, "jk.rank", rtol=rtol, atol=atol)
+    hint = "jax.vmap(jk.analysis.rank)(Js)"
+    Jr, guard = _guarded(J, rows, "jk.rank", hint, rtol=rtol, atol=atol)
     s = jnp.linalg.svd(Jr, compute_uv=False)
     rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
     tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * s[0])
@@ -254,7 +256,8 @@ def near_singular(
     """
     fn = "jk.near_singular"
     _check_measure(measure, fn)
-    Jr, guard = _guarded(J, rows, fn, threshold=threshold)
+    hint = f"jax.vmap(lambda J: {fn}(J, threshold))(Js)"
+    Jr, guard = _guarded(J, rows, fn, hint, threshold=threshold)
     return guard(_manipulability(Jr, measure) < threshold)
 
 
@@ -414,7 +417,7 @@ def joint_torques(J: Any, wrench: Any) -> jax.Array:
     under a trace.
     """
     fn = "jk.joint_torques"
-    J = check_J(J, fn)
+    J = check_J(J, fn, f"jax.vmap({fn}, in_axes=(0, None))(Js, wrench)")
     F = jnp.asarray(wrench)
     if F.shape != (J.shape[0],):
         raise ShapeError(
@@ -567,7 +570,7 @@ def wrist_decoupling(
     """
     fn = "jk.wrist_decoupling"
     arm, wrist, wrist_model = _wrist_joint_indices(robot, wrist_joints, fn)
-    q = check_q(robot, q, fn=fn)
+    q = check_q(robot, q, fn=fn, batch_hint=f"jax.vmap(lambda q: {fn}(robot, q, threshold))(qs)")
     guard = finite_guard(fn, q=q, threshold=threshold)
     q = guard.clean(q)
     J = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned").matrix()

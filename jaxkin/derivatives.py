@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_point, check_q, check_reference, result_dtype
+from ._jit import eager
 from .jacobians import analytical_jacobian_pass, jacobian_pass
 from .model import Robot
 from .representations import check_representation, guard_singular
@@ -95,7 +96,10 @@ def jacobian_dot(
     True
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot")
+    return eager(_jacobian_dot, robot, (f, reference), q, qd, pt)
 
+
+def _jacobian_dot(robot, f, reference, q, qd, pt):
     def J(qq):
         return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
@@ -124,7 +128,10 @@ def jacobian_dot_qd(
     [-1.0, -1.0]
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot_qd")
+    return eager(_jacobian_dot_qd, robot, (f, reference), q, qd, pt)
 
+
+def _jacobian_dot_qd(robot, f, reference, q, qd, pt):
     def V(qq):
         return jacobian_pass(robot, qq, f, pt, reference).times(qd)
 
@@ -163,7 +170,10 @@ def kinematic_hessian(
     fn = "jk.kinematic_hessian"
     hint = f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
     q, _, f, pt = _check_call(robot, q, q, frame, point, reference, fn, hint)
+    return eager(_hessian, robot, (f, reference), q, pt)
 
+
+def _hessian(robot, f, reference, q, pt):
     def J(qq):
         return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
@@ -220,11 +230,7 @@ def analytical_jacobian_dot(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
-
-    def Ja(qq):
-        return analytical_jacobian_pass(robot, qq, f, pt, representation)
-
-    (_, margin), (Jad, _) = jax.jvp(Ja, (q,), (qd,))
+    Jad, margin = eager(_analytical_dot, robot, (f, representation), q, qd, pt)
     return _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 
@@ -244,10 +250,22 @@ def analytical_jacobian_dot_qd(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot_qd"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
+    acc, margin = eager(_analytical_dot_qd, robot, (f, representation), q, qd, pt)
+    return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
 
+
+def _analytical_dot(robot, f, representation, q, qd, pt):
+    def Ja(qq):
+        return analytical_jacobian_pass(robot, qq, f, pt, representation)
+
+    (_, margin), (Jad, _) = jax.jvp(Ja, (q,), (qd,))
+    return Jad, margin
+
+
+def _analytical_dot_qd(robot, f, representation, q, qd, pt):
     def xd(qq):
         Ja, margin = analytical_jacobian_pass(robot, qq, f, pt, representation)
         return Ja @ qd, margin
 
     (_, margin), (acc, _) = jax.jvp(xd, (q,), (qd,))
-    return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
+    return acc, margin

@@ -40,6 +40,7 @@ import numpy as np
 
 from . import spatial
 from ._checks import (
+    check_J,
     check_J_and_vector,
     check_q,
     finite_guard,
@@ -131,7 +132,8 @@ def pinv_velocity(
     Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.pinv_velocity"
-    J, v = check_J_and_vector(J, v, fn)
+    hint = f"jax.vmap(lambda J, v: {fn}(J, v, rcond=rcond))(Js, vs)"
+    J, v = check_J_and_vector(J, v, fn, batch_hint=hint)
     Wx = _weight_factor(task_weights, J.shape[0], "task_weights", fn, J.dtype)
     Wq = _weight_factor(joint_weights, J.shape[1], "joint_weights", fn, J.dtype)
     guard = finite_guard(
@@ -183,7 +185,8 @@ def damped_least_squares(
     Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.damped_least_squares"
-    J, v = check_J_and_vector(J, v, fn)
+    hint = f"jax.vmap(lambda J, v: {fn}(J, v, damping=damping))(Js, vs)"
+    J, v = check_J_and_vector(J, v, fn, batch_hint=hint)
     lam = jnp.asarray(damping, dtype=J.dtype)
     if lam.shape != ():
         raise ShapeError(f"{fn}: damping must be a scalar, got shape {lam.shape}.")
@@ -211,9 +214,8 @@ def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Arr
     trace).
     """
     fn = "jk.adaptive_damping"
-    J = jnp.asarray(J)
-    if J.ndim != 2:
-        raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
+    hint = f"jax.vmap(lambda J: {fn}(J, max_damping=max_damping, threshold=threshold))(Js)"
+    J = check_J(J, fn, batch_hint=hint)
     guard = finite_guard(fn, J=J, max_damping=max_damping, threshold=threshold)
     J = guard.clean(J)
     if not threshold > 0 or not max_damping >= 0:
@@ -257,9 +259,8 @@ def null_space_projector(J: Any, *, rcond: float | None = None, damping: Any = N
     input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.null_space_projector"
-    J = jnp.asarray(J)
-    if J.ndim != 2:
-        raise ShapeError(f"{fn}: J must have shape (m, dof), got {J.shape}.")
+    how = "rcond=rcond" if damping is None else "damping=damping"
+    J = check_J(J, fn, batch_hint=f"jax.vmap(lambda J: {fn}(J, {how}))(Js)")
     guard = finite_guard(fn, J=J, rcond=rcond, damping=damping)
     J = guard.clean(J)
     Jp = _generalised_inverse(J, rcond, damping, fn)
@@ -283,7 +284,9 @@ def null_space_velocity(
     Non-finite input: module doc (raises eagerly; NaN under a trace).
     """
     fn = "jk.null_space_velocity"
-    J, v = check_J_and_vector(J, v, fn)
+    how = "rcond=rcond" if damping is None else "damping=damping"
+    hint = f"jax.vmap(lambda J, v: {fn}(J, v, qd_secondary, {how}))(Js, vs)"
+    J, v = check_J_and_vector(J, v, fn, batch_hint=hint)
     qd0 = jnp.asarray(qd_secondary, dtype=J.dtype)
     if qd0.shape != (J.shape[1],):
         raise ShapeError(
@@ -398,7 +401,8 @@ def resolved_rate_control(
     module doc (raises eagerly; every field NaN under a trace).
     """
     fn = "jk.resolved_rate_control"
-    q0 = check_q(robot, q0, what="q0", fn=fn)
+    hint = f"jax.vmap(lambda q0: {fn}(robot, q0, T_path, dt))(q0s), one run per start"
+    q0 = check_q(robot, q0, what="q0", fn=fn, batch_hint=hint)
     dtype = result_dtype(robot, q0)
     Ts = jnp.asarray(T_path, dtype=dtype)
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:

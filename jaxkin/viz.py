@@ -88,7 +88,8 @@ def _poses(robot, qs: np.ndarray) -> np.ndarray:
 def _check_qs(robot, qs: Any, what: str = "q", batch: bool = False) -> np.ndarray:
     """Joint values as float64 numpy (1, dof), or (n_steps, dof) for a trajectory."""
     if not batch:
-        q = check_q(robot, qs, what=what, fn="jaxkin.viz")
+        hint = "jk.viz.animate(robot, qs) to draw a joint trajectory (one configuration per frame)"
+        q = check_q(robot, qs, what=what, fn="jaxkin.viz", batch_hint=hint)
         if not np.all(np.isfinite(np.asarray(q))):
             raise JaxkinError(f"{what} contains non-finite values.")
         return np.asarray(q, dtype=float)[None]
