@@ -25,10 +25,6 @@ from jaxkin import NoDefaultFrameError
 from jaxkin.robots import example_robot_data as erd
 from jaxkin.urdf import MOVING_TYPES, parse_urdf
 
-needs_erd = pytest.mark.skipif(
-    erd.robots_dir() is None, reason="example-robot-data is not installed (test extra)"
-)
-
 
 def joint(name, kind, parent, child, xyz="0 0 0.1", axis="0 0 1"):
     limit = '<limit lower="-2" upper="2" effort="1" velocity="1"/>' if kind != "fixed" else ""
@@ -197,7 +193,6 @@ def no_zero_column(robot, frame=None, n=3):
         assert np.all(np.any(J != 0.0, axis=0)), (robot.name, q, J)
 
 
-@needs_erd
 def test_ur5_default_frame_is_moved_by_every_joint():
     path = erd.path("erd/ur5_robot")
     whole = jk.load_urdf(path, dtype=np.float64)  # the issue: this defaulted to the leaf 'base'
@@ -210,7 +205,6 @@ def test_ur5_default_frame_is_moved_by_every_joint():
     np.testing.assert_allclose(jk.fk(robot, q), jk.fk(whole, q, frame="tool0"), atol=1e-15)
 
 
-@needs_erd
 def test_panda_is_a_7_dof_arm_with_its_tcp_as_default_frame():
     links = parse_urdf(erd.path("erd/panda")).link_names
     tcp = "panda_hand_tcp" if "panda_hand_tcp" in links else "panda_hand"
@@ -223,7 +217,6 @@ def test_panda_is_a_7_dof_arm_with_its_tcp_as_default_frame():
         jk.fk(jk.load_urdf(erd.path("erd/panda")), np.zeros(8))  # the whole file: fingers
 
 
-@needs_erd
 def test_zoo_tool_frames_exist_and_are_moved_by_every_joint():
     for name, frames in erd.TOOL_FRAMES.items():
         if name not in erd.names():
@@ -239,7 +232,6 @@ def test_zoo_tool_frames_exist_and_are_moved_by_every_joint():
     assert jk.robots.load("erd/panda", tip="panda_link8").dof == 7
 
 
-@needs_erd
 def test_every_erd_file_defaults_to_a_frame_every_moving_joint_moves_or_lists_candidates():
     chains = trees = 0
     for name in jk.robots.erd_names():

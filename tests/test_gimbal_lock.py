@@ -24,16 +24,10 @@ from hypothesis import strategies as st
 import jaxkin.testing as jkt
 from jaxkin import spatial
 
-with warnings.catch_warnings():
+with warnings.catch_warnings():  # the oracles are test dependencies (the test extra)
     warnings.simplefilter("ignore", DeprecationWarning)
-    try:
-        import pinocchio as pin
-    except ImportError:  # pragma: no cover - the test extra installs it
-        pin = None
-    try:
-        import spatialmath.base as smb
-    except ImportError:  # pragma: no cover
-        smb = None
+    import pinocchio as pin
+    import spatialmath.base as smb
 
 TOL = {np.float64: 1e-12, np.float32: 1e-5}
 DTYPES = [np.float64, np.float32]
@@ -332,7 +326,6 @@ def test_round_trip_derivative_is_identity_near_lock():
 
 
 # --- oracles: Pinocchio (rpy) and spatialmath (zyz) rebuild the same matrix -------------------
-@pytest.mark.skipif(pin is None, reason="pinocchio (test extra) not installed")
 @given(st.one_of(rpy_exact_lock, rpy_near_lock, jkt.rotations()))
 @example(_rpy_locked_product(0.7, 1, 0.3))
 @example(_rpy_locked_product(0.7, -1, 0.3))
@@ -348,7 +341,6 @@ def test_rpy_against_pinocchio(R):
         np.testing.assert_allclose(_wrap(ours - theirs), 0.0, atol=1e-12)
 
 
-@pytest.mark.skipif(smb is None, reason="spatialmath (test extra) not installed")
 @given(st.one_of(zyz_exact_lock, zyz_near_lock, jkt.rotations()))
 @example(_zyz_locked_product(0.3, 1, 0.5))
 @example(_zyz_locked_product(0.3, 0, 0.5))

@@ -596,9 +596,6 @@ def test_load_urdf_is_exported():
 
 
 # ----------------------------------------------------------------------------------- registry
-needs_erd = pytest.mark.skipif(
-    erd.robots_dir() is None, reason="example-robot-data is not installed (test extra)"
-)
 
 # Files of example-robot-data 6.0 that are not loadable kinematic models, and why.
 ERD_UNLOADABLE = {
@@ -609,7 +606,6 @@ ERD_UNLOADABLE = {
 }
 
 
-@needs_erd
 def test_erd_names_do_not_shadow_the_zoo():
     names = jk.robots.erd_names()
     assert len(names) >= 60
@@ -634,7 +630,6 @@ def test_erd_names_do_not_shadow_the_zoo():
     assert hand.frame_names[-1] == "panda_hand" and hand.dof == 7
 
 
-@needs_erd
 def test_every_erd_file_loads_or_says_why():
     loaded = 0
     for name in jk.robots.erd_names():
@@ -650,7 +645,6 @@ def test_every_erd_file_loads_or_says_why():
         jk.robots.load("erd/ur3")  # the message points to the loadable siblings
 
 
-@needs_erd
 def test_unknown_erd_name():
     with pytest.raises(jk.UnknownRobotError, match=r"Did you mean 'erd/panda'"):
         jk.robots.load("erd/pandaa")

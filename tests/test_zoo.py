@@ -2,8 +2,8 @@
 central finite differences on SE(3).
 
 * Every entry of ``jk.robots.names()`` loads in float64 and float32 (every leaf in that dtype), has
-  a ``"zero"`` configuration, finite ``fk``/``fk_all`` at every named configuration (float32 within
-  ORACLES.md's float32 bound of float64), named configurations within finite joint limits (except
+  a ``"zero"`` configuration, finite ``fk``/``fk_all`` at every named configuration (float32
+  within tests/README.md's float32 bound of float64), named configurations within finite joint limits (except
   the documented ``OUTSIDE_TRAVEL`` reference poses), and a non-empty source; unknown names and
   parameters raise jaxkin errors that list what exists.
 * For every zoo robot and every reference ("world_aligned", "local", "world"), at random
@@ -183,7 +183,7 @@ def test_loads_with_dtype_and_fk_finite_at_named_configurations(name, dtype):
     assert np.all(np.isfinite(Ts)), name
     np.testing.assert_array_equal(T, Ts[:, -1])  # fk's default frame: fk_all's last (the tip)
     if dtype == np.float32:
-        # float32 against float64 (ORACLES.md float32 bound: 4 eps32 (1 + max|q|) reach dof)
+        # float32 against float64 (tests/README.md float32 bound: 4 eps32 (1 + max|q|) reach dof)
         Ts64 = ref["Ts_named"]
         eps32 = float(np.finfo(np.float32).eps)
         reach = max(1.0, float(np.max(np.linalg.norm(Ts64[..., :3, 3], axis=-1))))
