@@ -3,9 +3,9 @@ central finite differences on SE(3).
 
 * Every entry of ``jk.robots.names()`` loads in float64 and float32 (every leaf in that dtype), has
   a ``"zero"`` configuration, finite ``fk``/``fk_all`` at every named configuration (float32
-  within tests/README.md's float32 bound of float64), named configurations within finite joint limits (except
-  the documented ``OUTSIDE_TRAVEL`` reference poses), and a non-empty source; unknown names and
-  parameters raise jaxkin errors that list what exists.
+  within tests/README.md's float32 bound of float64), named configurations within finite joint
+  limits (except the documented ``OUTSIDE_TRAVEL`` reference poses), and a non-empty source;
+  unknown names and parameters raise jaxkin errors that list what exists.
 * For every zoo robot and every reference ("world_aligned", "local", "world"), at random
   configurations within the limits (fixed seed per robot) and at the named configurations: the
   hand-built geometric Jacobian (Table 4.1), ``jk.jacobian_fwd`` and ``jk.jacobian_rev`` agree to
