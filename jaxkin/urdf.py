@@ -275,104 +275,147 @@ def _looks_like_xml(text: str) -> bool:
     return text.lstrip("\ufeff \t\r\n").startswith("<")
 
 
+_TOO_BIG = (
+    "raise the cap with jk.load_urdf(..., max_bytes=N) (or parse_urdf(..., max_bytes=N)) "
+    "if the file is legitimate."
+)
+
+
 def _read_source(source: Any, max_bytes: int) -> tuple[bytes | str, str]:
     """The document and a label for messages. Reads at most ``max_bytes + 1`` bytes."""
-    too_big = (
-        "raise the cap with jk.load_urdf(..., max_bytes=N) (or parse_urdf(..., max_bytes=N)) "
-        "if the file is legitimate."
-    )
     if isinstance(source, (bytes, bytearray, memoryview)):
-        data = bytes(source)
-        if len(data) > max_bytes:
-            raise URDFError(
-                f"the document is {len(data)} bytes, over the {max_bytes}-byte limit (max_bytes).",
-                file="<bytes>",
-                fix=too_big,
-            )
-        return data, "<bytes>"
+        return _read_bytes(bytes(source), max_bytes), "<bytes>"
     if isinstance(source, str) and _looks_like_xml(source):
-        if len(source) > max_bytes or len(source.encode("utf-8", "surrogatepass")) > max_bytes:
-            raise URDFError(
-                f"the document is over the {max_bytes}-byte limit (max_bytes).",
-                file="<string>",
-                fix=too_big,
-            )
-        return source, "<string>"
+        return _read_xml_string(source, max_bytes), "<string>"
     if isinstance(source, (str, os.PathLike)):
-        try:
-            path = Path(source)
-        except TypeError:
-            path = None
-        label = str(source)
-        if len(label) > 200:  # a long non-XML string: shown shortened in messages
-            label = label[:200] + "..."
-        if path is None or not str(source):
-            raise ModelError(
-                f"source must be a URDF path, an XML string or bytes, got {source!r}."
-            ) from None
-        if path.suffix == ".xacro" or label.endswith(".xacro"):
-            raise URDFError(
-                "this is a xacro file; jaxkin never runs xacro (it executes code and reads other "
-                "files).",
-                file=label,
-                fix=f"expand it first: `xacro {label} > robot.urdf`, then load robot.urdf.",
-            )
-        try:
-            if not path.is_file():
-                if path.is_dir():
-                    hint = "it is a directory."
-                elif path.exists():
-                    hint = "it is not a regular file."
-                else:
-                    hint = "no such file."
-                raise URDFError(
-                    f"cannot read the URDF: {hint}",
-                    file=label,
-                    fix="pass the path of a .urdf file, or the XML itself as a string "
-                    "(starting with '<').",
-                )
-            size = path.stat().st_size
-            if size > max_bytes:
-                raise URDFError(
-                    f"the file is {size} bytes, over the {max_bytes}-byte limit (max_bytes).",
-                    file=label,
-                    fix=too_big,
-                )
-            with open(path, "rb") as fh:
-                data = fh.read(max_bytes + 1)
-        except URDFError:
-            raise
-        except (OSError, ValueError) as e:  # ValueError: e.g. an embedded NUL character
-            raise URDFError(
-                f"cannot read the URDF: {getattr(e, 'strerror', None) or e}.",
-                file=label,
-                fix="check the path, or pass the XML itself (a string starting with '<').",
-            ) from None
-        if len(data) > max_bytes:
-            raise URDFError(
-                f"the file is over the {max_bytes}-byte limit (max_bytes).",
-                file=label,
-                fix=too_big,
-            )
-        return data, label
+        return _read_path(source, max_bytes)
     raise ModelError(
         "source must be a URDF path (str or os.PathLike), an XML string or bytes, got "
         f"{type(source).__name__}."
     )
 
 
+def _read_bytes(data: bytes, max_bytes: int) -> bytes:
+    """The document given as bytes, within the size cap."""
+    if len(data) > max_bytes:
+        raise URDFError(
+            f"the document is {len(data)} bytes, over the {max_bytes}-byte limit (max_bytes).",
+            file="<bytes>",
+            fix=_TOO_BIG,
+        )
+    return data
+
+
+def _read_xml_string(source: str, max_bytes: int) -> str:
+    """The document given as an XML string, within the size cap (counted in UTF-8 bytes)."""
+    if len(source) > max_bytes or len(source.encode("utf-8", "surrogatepass")) > max_bytes:
+        raise URDFError(
+            f"the document is over the {max_bytes}-byte limit (max_bytes).",
+            file="<string>",
+            fix=_TOO_BIG,
+        )
+    return source
+
+
+def _read_path(source: str | os.PathLike, max_bytes: int) -> tuple[bytes, str]:
+    """The bytes of the file at ``source`` and its label (the path, shortened if long)."""
+    try:
+        path = Path(source)
+    except TypeError:
+        path = None
+    label = str(source)
+    if len(label) > 200:  # a long non-XML string: shown shortened in messages
+        label = label[:200] + "..."
+    if path is None or not str(source):
+        raise ModelError(
+            f"source must be a URDF path, an XML string or bytes, got {source!r}."
+        ) from None
+    if path.suffix == ".xacro" or label.endswith(".xacro"):
+        raise URDFError(
+            "this is a xacro file; jaxkin never runs xacro (it executes code and reads other "
+            "files).",
+            file=label,
+            fix=f"expand it first: `xacro {label} > robot.urdf`, then load robot.urdf.",
+        )
+    data = _read_file(path, label, max_bytes)
+    if len(data) > max_bytes:
+        raise URDFError(
+            f"the file is over the {max_bytes}-byte limit (max_bytes).",
+            file=label,
+            fix=_TOO_BIG,
+        )
+    return data, label
+
+
+def _read_file(path: Path, label: str, max_bytes: int) -> bytes:
+    """At most ``max_bytes + 1`` bytes of a regular file; any failure is a :class:`URDFError`."""
+    try:
+        if not path.is_file():
+            if path.is_dir():
+                hint = "it is a directory."
+            elif path.exists():
+                hint = "it is not a regular file."
+            else:
+                hint = "no such file."
+            raise URDFError(
+                f"cannot read the URDF: {hint}",
+                file=label,
+                fix="pass the path of a .urdf file, or the XML itself as a string "
+                "(starting with '<').",
+            )
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise URDFError(
+                f"the file is {size} bytes, over the {max_bytes}-byte limit (max_bytes).",
+                file=label,
+                fix=_TOO_BIG,
+            )
+        with open(path, "rb") as fh:
+            return fh.read(max_bytes + 1)
+    except URDFError:
+        raise
+    except (OSError, ValueError) as e:  # ValueError: e.g. an embedded NUL character
+        raise URDFError(
+            f"cannot read the URDF: {getattr(e, 'strerror', None) or e}.",
+            file=label,
+            fix="check the path, or pass the XML itself (a string starting with '<').",
+        ) from None
+
+
 def _parse_xml(data: bytes | str, label: str) -> _Element:
     """Parse with expat, refusing any DTD before it is processed; build a light element tree."""
     is_text = isinstance(data, str)
-    # Leading whitespace (a triple-quoted string's first newline) would make an XML declaration
-    # illegal; drop it and count its lines so that reported line numbers stay the source's.
-    stripped = data.lstrip() if is_text else data.lstrip(b" \t\r\n")
-    skipped = data[: len(data) - len(stripped)]
-    offset = skipped.count("\n" if is_text else b"\n")
-    data = stripped
+    data, offset = _strip_leading_space(data)
     # A str is parsed as UTF-8 whatever its XML declaration says (it is already decoded).
     parser = expat.ParserCreate(encoding="UTF-8" if is_text else None)
     parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    _refuse_dtd(parser, label, offset)
+    root = _build_tree(parser, label, offset)
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError as e:
+        raise _syntax_error(e, label, offset) from None
+    except RecursionError:  # pragma: no cover - expat is iterative; belt and braces
+        raise URDFError("the XML is nested too deeply.", file=label) from None
+    if not root:
+        raise URDFError("the document has no root element.", file=label)
+    return root[0]
+
+
+def _strip_leading_space(data: bytes | str) -> tuple[bytes | str, int]:
+    """The document without its leading whitespace, and the number of lines dropped.
+
+    Leading whitespace (a triple-quoted string's first newline) would make an XML declaration
+    illegal; it is dropped and its lines counted so that reported line numbers stay the source's.
+    """
+    is_text = isinstance(data, str)
+    stripped = data.lstrip() if is_text else data.lstrip(b" \t\r\n")
+    skipped = data[: len(data) - len(stripped)]
+    return stripped, skipped.count("\n" if is_text else b"\n")
+
+
+def _refuse_dtd(parser: Any, label: str, offset: int) -> None:
+    """Install expat handlers that raise on any DTD, entity or notation declaration."""
     fix_dtd = (
         "remove the <!DOCTYPE ...> block and write the values out; URDF needs no DTD, and jaxkin "
         "refuses one so that no entity is ever expanded and no external file or URL is read."
@@ -399,6 +442,10 @@ def _parse_xml(data: bytes | str, label: str) -> _Element:
     parser.ElementDeclHandler = refuse("ELEMENT declaration")
     parser.AttlistDeclHandler = refuse("ATTLIST declaration")
 
+
+def _build_tree(parser: Any, label: str, offset: int) -> list[_Element]:
+    """Install the element handlers; the returned list receives the root element while parsing.
+    ``xacro:`` elements are refused."""
     root: list[_Element] = []
     stack: list[_Element] = []
 
@@ -423,27 +470,24 @@ def _parse_xml(data: bytes | str, label: str) -> _Element:
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
-    try:
-        parser.Parse(data, True)
-    except expat.ExpatError as e:
-        message = expat.ErrorString(e.code)
-        fix = "fix the XML syntax at that line (a URDF must be well-formed XML)."
-        if "undefined entity" in message:
-            fix = (
-                "write the character out or use one of XML's predefined entities "
-                "(&lt; &gt; &amp; &quot; &apos;); entity declarations are refused."
-            )
-        raise URDFError(
-            f"not well-formed XML: {message} (column {e.offset + 1}).",
-            file=label,
-            line=e.lineno + offset,
-            fix=fix,
-        ) from None
-    except RecursionError:  # pragma: no cover - expat is iterative; belt and braces
-        raise URDFError("the XML is nested too deeply.", file=label) from None
-    if not root:
-        raise URDFError("the document has no root element.", file=label)
-    return root[0]
+    return root
+
+
+def _syntax_error(e: expat.ExpatError, label: str, offset: int) -> URDFError:
+    """The error for malformed XML, at the source's line."""
+    message = expat.ErrorString(e.code)
+    fix = "fix the XML syntax at that line (a URDF must be well-formed XML)."
+    if "undefined entity" in message:
+        fix = (
+            "write the character out or use one of XML's predefined entities "
+            "(&lt; &gt; &amp; &quot; &apos;); entity declarations are refused."
+        )
+    return URDFError(
+        f"not well-formed XML: {message} (column {e.offset + 1}).",
+        file=label,
+        line=e.lineno + offset,
+        fix=fix,
+    )
 
 
 # ---------------------------------------------------------------------------------- validation
@@ -584,6 +628,32 @@ def _axis(ctx: _Context, v: tuple, elem: _Element, owner: str, kind: str):
 def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
     name = ctx.name(elem, "<joint>")
     owner = f"<joint name={name!r}>"
+    kind = _joint_type(ctx, elem, owner)
+    parent_el = ctx.single(elem, "parent", owner, required=True)
+    child_el = ctx.single(elem, "child", owner, required=True)
+    parent = ctx.name(parent_el, f"<parent> of joint {name!r}", "link")
+    child = ctx.name(child_el, f"<child> of joint {name!r}", "link")
+    xyz, rpy = _joint_origin(ctx, elem, owner, name)
+    axis = _joint_axis(ctx, elem, owner, name, kind)
+    lower, upper = _joint_limits(ctx, elem, owner, name, kind)
+    mimic = _joint_mimic(ctx, elem, owner, name, kind)
+    return URDFJoint(
+        name=name,
+        type=kind,
+        parent=parent,
+        child=child,
+        xyz=xyz,
+        rpy=rpy,
+        axis=axis,
+        lower=float(lower),
+        upper=float(upper),
+        mimic=mimic,
+        line=elem.line,
+    )
+
+
+def _joint_type(ctx: _Context, elem: _Element, owner: str) -> str:
+    """The ``type`` of a ``<joint>``: a supported or a refused (floating, planar) type."""
     kind = elem.attrib.get("type")
     if kind is None or kind not in (*SUPPORTED_TYPES, *REFUSED_TYPES):
         raise ctx.error(
@@ -594,11 +664,11 @@ def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
             value=kind,
             fix=f"use one of {', '.join(SUPPORTED_TYPES)} (floating and planar are refused).",
         )
-    parent_el = ctx.single(elem, "parent", owner, required=True)
-    child_el = ctx.single(elem, "child", owner, required=True)
-    parent = ctx.name(parent_el, f"<parent> of joint {name!r}", "link")
-    child = ctx.name(child_el, f"<child> of joint {name!r}", "link")
+    return kind
 
+
+def _joint_origin(ctx: _Context, elem: _Element, owner: str, name: str) -> tuple[tuple, tuple]:
+    """``(xyz, rpy)`` of the joint's ``<origin>`` (zero where missing), bounded in magnitude."""
     xyz, rpy = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
     origin = ctx.single(elem, "origin", owner, required=False)
     if origin is not None:
@@ -607,7 +677,11 @@ def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
         ctx.bounded(xyz, origin, where, "xyz", "m")
         rpy = ctx.vector3(origin, where, "rpy", (0.0, 0.0, 0.0))
         ctx.bounded(rpy, origin, where, "rpy", "rad")
+    return xyz, rpy
 
+
+def _joint_axis(ctx: _Context, elem: _Element, owner: str, name: str, kind: str) -> tuple:
+    """The unit axis of the joint's ``<axis>`` (default ``1 0 0``; ``1 0 0`` for fixed joints)."""
     axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
     axis_el = ctx.single(elem, "axis", owner, required=False)
     if axis_el is not None:
@@ -616,7 +690,12 @@ def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
         axis = _axis(ctx, v, axis_el, where, kind)
     if kind not in MOVING_TYPES:
         axis = (1.0, 0.0, 0.0) if kind == "fixed" else axis
+    return axis
 
+
+def _joint_limits(ctx: _Context, elem: _Element, owner: str, name: str, kind: str):
+    """``(lower, upper)`` of the joint: its ``<limit>`` (required on revolute and prismatic
+    joints), infinite for continuous joints, NaN for the others."""
     lower, upper = math.nan, math.nan
     limit = ctx.single(elem, "limit", owner, required=False)
     if kind in ("revolute", "prismatic") and limit is None:
@@ -648,38 +727,30 @@ def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
             lower, upper = lo, hi
     if kind == "continuous":
         lower, upper = -math.inf, math.inf
+    return lower, upper
 
-    mimic = None
+
+def _joint_mimic(
+    ctx: _Context, elem: _Element, owner: str, name: str, kind: str
+) -> URDFMimic | None:
+    """The joint's ``<mimic>`` (multiplier 1 and offset 0 by default), or None."""
     mimic_el = ctx.single(elem, "mimic", owner, required=False)
-    if mimic_el is not None:
-        where = f"<mimic> of joint {name!r}"
-        if kind in REFUSED_TYPES:
-            raise ctx.error(
-                f"a {kind} joint cannot mimic another joint.",
-                mimic_el,
-                element=where,
-                fix="remove the <mimic>, or give the joint a moving type.",
-            )
-        leader = ctx.name(mimic_el, where, "joint", example="joint1")
-        mult = ctx.number(mimic_el, where, "multiplier", 1.0)
-        off = ctx.number(mimic_el, where, "offset", 0.0)
-        for attr, val in (("multiplier", mult), ("offset", off)):
-            ctx.bounded((val,), mimic_el, where, attr, "")
-        mimic = URDFMimic(leader, mult, off, mimic_el.line)
-
-    return URDFJoint(
-        name=name,
-        type=kind,
-        parent=parent,
-        child=child,
-        xyz=xyz,
-        rpy=rpy,
-        axis=axis,
-        lower=float(lower),
-        upper=float(upper),
-        mimic=mimic,
-        line=elem.line,
-    )
+    if mimic_el is None:
+        return None
+    where = f"<mimic> of joint {name!r}"
+    if kind in REFUSED_TYPES:
+        raise ctx.error(
+            f"a {kind} joint cannot mimic another joint.",
+            mimic_el,
+            element=where,
+            fix="remove the <mimic>, or give the joint a moving type.",
+        )
+    leader = ctx.name(mimic_el, where, "joint", example="joint1")
+    mult = ctx.number(mimic_el, where, "multiplier", 1.0)
+    off = ctx.number(mimic_el, where, "offset", 0.0)
+    for attr, val in (("multiplier", mult), ("offset", off)):
+        ctx.bounded((val,), mimic_el, where, attr, "")
+    return URDFMimic(leader, mult, off, mimic_el.line)
 
 
 def _suggest(name: str, candidates: Sequence[str]) -> str:
@@ -690,6 +761,40 @@ def _suggest(name: str, candidates: Sequence[str]) -> str:
 def _topology(ctx: _Context, links: list[URDFLink], joints: list[URDFJoint]) -> str:
     """Check that links and joints form one tree; return the root link. Iterative."""
     link_line = {link.name: link.line for link in links}
+    parent_joint = _parent_joints(ctx, link_line, joints)
+    roots = [link.name for link in links if link.name not in parent_joint]
+    # Every link reachable from a root is fine; any other link lies on a cycle (each link has at
+    # most one parent, so walking up from it must come back to itself).
+    children: dict[str, list[str]] = {link.name: [] for link in links}
+    for j in joints:
+        children[j.parent].append(j.child)
+    seen = set(roots)
+    stack = list(roots)
+    while stack:
+        for c in children[stack.pop()]:
+            if c not in seen:
+                seen.add(c)
+                stack.append(c)
+    if len(seen) != len(links):
+        start = next(link.name for link in links if link.name not in seen)
+        raise _cycle_error(ctx, start, parent_joint)
+    if len(roots) > 1:
+        shown = roots if len(roots) <= 8 else [*roots[:8], "..."]
+        raise ctx.error(
+            f"the links form {len(roots)} separate trees, with roots {shown}; a URDF has exactly "
+            "one root link.",
+            line=link_line[roots[1]],
+            element=f"<link name={roots[1]!r}>",
+            fix="connect every root but one to the robot with a joint, or delete the stray links.",
+        )
+    return roots[0]
+
+
+def _parent_joints(
+    ctx: _Context, link_line: dict[str, int | None], joints: list[URDFJoint]
+) -> dict[str, URDFJoint]:
+    """The joint above each child link, checking that every joint joins two different declared
+    links and that no link has two parents."""
     parent_joint: dict[str, URDFJoint] = {}
     for j in joints:
         for role, link in (("parent", j.parent), ("child", j.child)):
@@ -723,48 +828,29 @@ def _topology(ctx: _Context, links: list[URDFLink], joints: list[URDFJoint]) -> 
                 fix="give each link at most one parent joint (remove or re-parent one of them).",
             )
         parent_joint[j.child] = j
-    roots = [link.name for link in links if link.name not in parent_joint]
-    # Every link reachable from a root is fine; any other link lies on a cycle (each link has at
-    # most one parent, so walking up from it must come back to itself).
-    children: dict[str, list[str]] = {link.name: [] for link in links}
-    for j in joints:
-        children[j.parent].append(j.child)
-    seen = set(roots)
-    stack = list(roots)
-    while stack:
-        for c in children[stack.pop()]:
-            if c not in seen:
-                seen.add(c)
-                stack.append(c)
-    if len(seen) != len(links):
-        start = next(link.name for link in links if link.name not in seen)
-        path = [start]
-        visited = {start}
-        cur = parent_joint[start].parent
-        while cur not in visited:
-            path.append(cur)
-            visited.add(cur)
-            cur = parent_joint[cur].parent
-        cycle = [*path[path.index(cur) :], cur]
-        cycle.reverse()
-        j = parent_joint[cycle[1]]
-        raise ctx.error(
-            f"the joints form a cycle: {' -> '.join(cycle)}. A URDF is a tree.",
-            line=j.line,
-            element=f"<joint name={j.name!r}>",
-            fix="break the cycle: every link but the root needs exactly one parent joint, and "
-            "following parents must end at the root.",
-        )
-    if len(roots) > 1:
-        shown = roots if len(roots) <= 8 else [*roots[:8], "..."]
-        raise ctx.error(
-            f"the links form {len(roots)} separate trees, with roots {shown}; a URDF has exactly "
-            "one root link.",
-            line=link_line[roots[1]],
-            element=f"<link name={roots[1]!r}>",
-            fix="connect every root but one to the robot with a joint, or delete the stray links.",
-        )
-    return roots[0]
+    return parent_joint
+
+
+def _cycle_error(ctx: _Context, start: str, parent_joint: dict[str, URDFJoint]) -> URDFError:
+    """The error for the cycle of joints reached by walking up the parents from ``start`` (a link
+    that no root reaches)."""
+    path = [start]
+    visited = {start}
+    cur = parent_joint[start].parent
+    while cur not in visited:
+        path.append(cur)
+        visited.add(cur)
+        cur = parent_joint[cur].parent
+    cycle = [*path[path.index(cur) :], cur]
+    cycle.reverse()
+    j = parent_joint[cycle[1]]
+    return ctx.error(
+        f"the joints form a cycle: {' -> '.join(cycle)}. A URDF is a tree.",
+        line=j.line,
+        element=f"<joint name={j.name!r}>",
+        fix="break the cycle: every link but the root needs exactly one parent joint, and "
+        "following parents must end at the root.",
+    )
 
 
 def _resolve_mimics(

@@ -106,6 +106,33 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
       revolute/continuous/prismatic joint per entry of ``q`` named ``robot.joint_names``.
       ``jk.load_urdf(to_urdf(robot))`` gives the same pose for every frame name.
     """
+    _check_exportable(robot, prismatic_limit)
+    w = _Writer(robot, prismatic_limit)
+    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>"]
+    body: list[str] = []
+    base = _f64(robot.base)
+    if not np.array_equal(base, np.eye(4)):
+        world = _fresh("world", w.links)
+        lines.append(f"  <link name={quoteattr(world)}/>")
+        body += _fixed(_fresh("base_placement", w.joints), world, w.frames[0], base)
+    for j in range(len(robot.kinds)):
+        body += w.joint(j)
+    if robot.has_tool:
+        body += _fixed(
+            _fresh("tool_placement", w.joints), w.frames[-2], w.frames[-1], _f64(robot.tool)
+        )
+    lines += [f"  <link name={quoteattr(n)}/>" for n in w.frames + w.extra_links]
+    lines += body
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def _f64(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+def _check_exportable(robot: Robot, prismatic_limit: float | None) -> None:
+    """Refuse what is not a concrete robot, and a prismatic limit that is not positive."""
     if not isinstance(robot, Robot):
         raise ModelError(f"to_urdf expects a jaxkin Robot, got {type(robot).__name__}.")
     if is_traced(robot):
@@ -114,21 +141,10 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
         )
     if prismatic_limit is not None and not (math.isfinite(prismatic_limit) and prismatic_limit > 0):
         raise ModelError(f"prismatic_limit must be a positive number, got {prismatic_limit!r}.")
-    f64 = lambda x: np.asarray(x, dtype=np.float64)  # noqa: E731
-    pl = joint_placements(robot, xp=np)
-    axis, offset, mult = f64(robot.axis), f64(robot.offset), f64(robot.multiplier)
-    lower, upper = f64(robot.lower), f64(robot.upper)
-    frames = list(robot.frame_names)
-    links = set(frames)  # URDF keeps link and joint names apart
-    joints = set(robot.joint_names)
-    extra_links: list[str] = []
 
-    def new_link(name: str) -> str:
-        name = _fresh(name, links)
-        extra_links.append(name)
-        return name
 
-    # the independent joint of each q entry: the first joint driving it with multiplier +-1
+def _leaders(robot: Robot, mult: np.ndarray) -> dict[int, int]:
+    """The independent joint of each q entry: the first joint driving it with multiplier +-1."""
     leader: dict[int, int] = {}
     for j, i in enumerate(robot.q_index):
         if i >= 0 and i not in leader and abs(abs(mult[j]) - 1.0) <= 1e-12:
@@ -140,63 +156,84 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
                 f"{float(mult[robot.q_index.index(i)])!r}; URDF can scale only mimic joints. "
                 "Build the robot with multiplier 1 (scale q instead)."
             )
+    return leader
 
-    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>"]
-    body: list[str] = []
-    base = f64(robot.base)
-    if not np.array_equal(base, np.eye(4)):
-        world = _fresh("world", links)
-        lines.append(f"  <link name={quoteattr(world)}/>")
-        body += _fixed(_fresh("base_placement", joints), world, frames[0], base)
-    for j, kind in enumerate(robot.kinds):
-        parent, child = frames[robot.parents[j]], frames[j + 1]
+
+class _Writer:
+    """One export: the robot's numbers in float64, the link and joint names taken so far (URDF
+    keeps link and joint names apart) and the extra links written (``<frame>_motion``)."""
+
+    def __init__(self, robot: Robot, prismatic_limit: float | None) -> None:
+        self.robot, self.prismatic_limit = robot, prismatic_limit
+        self.pl = joint_placements(robot, xp=np)
+        self.axis, self.offset = _f64(robot.axis), _f64(robot.offset)
+        self.mult = _f64(robot.multiplier)
+        self.lower, self.upper = _f64(robot.lower), _f64(robot.upper)
+        self.frames = list(robot.frame_names)
+        self.links = set(self.frames)
+        self.joints = set(robot.joint_names)
+        self.extra_links: list[str] = []
+        self.leader = _leaders(robot, self.mult)
+
+    def joint(self, j: int) -> list[str]:
+        """The lines of joint ``j``: its URDF joint, and the fixed ``<frame>_dh`` joint after it
+        when it has a placement ``A_j``."""
+        robot, pl = self.robot, self.pl
+        parent, child = self.frames[robot.parents[j]], self.frames[j + 1]
         B = _transform(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
         has_A = pl.A is not None
-        motion_link = new_link(f"{child}_motion") if has_A else child
-        i = robot.q_index[j]
-        if kind == "fixed":
-            body += _fixed(_fresh(f"{child}_joint", joints), parent, motion_link, B)
+        motion_link = self._new_link(f"{child}_motion") if has_A else child
+        if robot.kinds[j] == "fixed":
+            out = _fixed(_fresh(f"{child}_joint", self.joints), parent, motion_link, B)
         else:
-            a = axis[j] / np.linalg.norm(axis[j])
-            if kind == "revolute":
-                B = B @ _transform(_rot(a, offset[j]), None)
-            else:
-                B = B @ _transform(None, a * offset[j])
-            lead = leader[i]
-            if lead == j:
-                name, a_out = robot.joint_names[i], a * np.sign(mult[j])
-                lo, hi = lower[i], upper[i]
-            else:
-                name, a_out = _fresh(f"{child}_joint", joints), a
-                lo, hi = sorted((mult[j] * lower[i], mult[j] * upper[i]))
-            urdf_type, limit = _limits(kind, lo, hi, name, prismatic_limit)
-            body += [
-                f"  <joint name={quoteattr(name)} type={quoteattr(urdf_type)}>",
-                f"    <parent link={quoteattr(parent)}/>",
-                f"    <child link={quoteattr(motion_link)}/>",
-                f"    {_origin(B)}",
-                f"    <axis xyz={quoteattr(' '.join(_num(v) for v in a_out))}/>",
-                *([f"    {limit}"] if limit else []),
-                *(
-                    []
-                    if lead == j
-                    else [
-                        f"    <mimic joint={quoteattr(robot.joint_names[i])} "
-                        f"multiplier={quoteattr(_num(mult[j] * np.sign(mult[lead])))} "
-                        'offset="0"/>'
-                    ]
-                ),
-                "  </joint>",
-            ]
+            out = self._moving(j, parent, motion_link, B)
         if has_A:
             A = _transform(pl.A[0][j], pl.A[1][j])
-            body += _fixed(_fresh(f"{child}_dh", joints), motion_link, child, A)
-    if robot.has_tool:
-        body += _fixed(_fresh("tool_placement", joints), frames[-2], frames[-1], f64(robot.tool))
-    lines += [f"  <link name={quoteattr(n)}/>" for n in frames + extra_links]
-    lines += body
-    lines.append("</robot>")
-    return "\n".join(lines) + "\n"
+            out += _fixed(_fresh(f"{child}_dh", self.joints), motion_link, child, A)
+        return out
+
+    def _new_link(self, name: str) -> str:
+        name = _fresh(name, self.links)
+        self.extra_links.append(name)
+        return name
+
+    def _moving(self, j: int, parent: str, motion_link: str, B: np.ndarray) -> list[str]:
+        """The URDF joint of moving joint ``j``: the zero offset folded into the origin ``B``, a
+        ``<mimic>`` unless it is the leader of its q entry."""
+        robot, kind, mult = self.robot, self.robot.kinds[j], self.mult
+        child = self.frames[j + 1]
+        i = robot.q_index[j]
+        a = self.axis[j] / np.linalg.norm(self.axis[j])
+        if kind == "revolute":
+            B = B @ _transform(_rot(a, self.offset[j]), None)
+        else:
+            B = B @ _transform(None, a * self.offset[j])
+        lead = self.leader[i]
+        if lead == j:
+            name, a_out = robot.joint_names[i], a * np.sign(mult[j])
+            lo, hi = self.lower[i], self.upper[i]
+        else:
+            name, a_out = _fresh(f"{child}_joint", self.joints), a
+            lo, hi = sorted((mult[j] * self.lower[i], mult[j] * self.upper[i]))
+        urdf_type, limit = _limits(kind, lo, hi, name, self.prismatic_limit)
+        return [
+            f"  <joint name={quoteattr(name)} type={quoteattr(urdf_type)}>",
+            f"    <parent link={quoteattr(parent)}/>",
+            f"    <child link={quoteattr(motion_link)}/>",
+            f"    {_origin(B)}",
+            f"    <axis xyz={quoteattr(' '.join(_num(v) for v in a_out))}/>",
+            *([f"    {limit}"] if limit else []),
+            *(
+                []
+                if lead == j
+                else [
+                    f"    <mimic joint={quoteattr(robot.joint_names[i])} "
+                    f"multiplier={quoteattr(_num(mult[j] * np.sign(mult[lead])))} "
+                    'offset="0"/>'
+                ]
+            ),
+            "  </joint>",
+        ]
 
 
 def _limits(kind, lo, hi, name, prismatic_limit) -> tuple[str, str | None]:
