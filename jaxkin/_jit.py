@@ -7,9 +7,6 @@ faster kernel that also compiles several times faster than one over traced param
 compile per robot value and option set; a changed robot (e.g. a calibrated one) compiles once
 more, and an equal robot loaded again reuses the compiled solver.
 
-:func:`eager` does the same for the building blocks (``fk``, Jacobians, twists, derivatives)
-called outside any transformation, from the second call on (see its docstring).
-
 A robot with traced leaves (the entry point called inside the user's ``jit``/``vmap``/``grad``
 over the robot) is passed through unchanged: the implementation is traced into the caller's
 computation, and new parameter values never retrace.
@@ -23,7 +20,6 @@ without them at the same speed. Entry points therefore compile with
 
 from __future__ import annotations
 
-import collections
 import functools
 from collections.abc import Callable
 from typing import Any
@@ -71,50 +67,3 @@ def robot_jit(impl: Callable, static_argnames: tuple[str, ...] = ()) -> Callable
 
     call.get_jitted = jitted_fn  # type: ignore[attr-defined]
     return call
-
-
-# ----------------------------------------------------------------------------- eager calls
-EAGER_CACHE_SIZE = 256
-"""How many compiled building blocks (kernel, robot, static options) are kept; least recently
-used ones are dropped first, so the cache never keeps robots alive without bound."""
-
-_eager_cache: collections.OrderedDict = collections.OrderedDict()
-
-
-def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
-    """``kernel(robot, *static, *arrays)``: compiled when called outside any transformation.
-
-    Inside a user's ``jit``/``vmap``/``grad`` (traced robot or arrays, or an active trace) the
-    kernel is traced inline. Called eagerly, the first call for a (kernel, robot, static) key runs
-    op by op (a robot used once, as in property tests over random robots, never pays a compile)
-    and the second compiles ``jax.jit`` of the kernel with the robot closed over (its constants
-    folded); later calls run that executable (one compile per array shape and dtype, as
-    ``jax.jit``). At most :data:`EAGER_CACHE_SIZE` keys are kept (least recently used dropped).
-    """
-    if inside_trace() or not robot.is_concrete or is_traced(arrays):
-        return kernel(robot, *static, *arrays)
-    key = (kernel, robot, static)
-    try:
-        entry = _eager_cache.pop(key)
-    except KeyError:
-        entry = None
-    except TypeError:  # unhashable static option: no cache
-        return kernel(robot, *static, *arrays)
-    if entry is None:
-        _eager_cache[key] = 1  # seen once: run op by op
-        _evict()
-        return kernel(robot, *static, *arrays)
-    if entry == 1:
-        entry = jax.jit(functools.partial(kernel, robot, *static))
-    _eager_cache[key] = entry
-    return entry(*arrays)
-
-
-def _evict() -> None:
-    while len(_eager_cache) > EAGER_CACHE_SIZE:
-        _eager_cache.popitem(last=False)
-
-
-def eager_cache_clear() -> None:
-    """Drop every compiled building block (tests; memory)."""
-    _eager_cache.clear()

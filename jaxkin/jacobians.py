@@ -36,7 +36,6 @@ from ._checks import (
     is_traced,
     result_dtype,
 )
-from ._jit import eager
 from .errors import JaxkinError, ShapeError
 from .kinematics import frame_pose, scalar_pass, scan_pass, uses_scan
 from .model import Robot
@@ -132,7 +131,7 @@ def geometric_jacobian(
     ([-1.0, -1.0], [1.0, 1.0])
     """
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.geometric_jacobian")
-    return eager(_matrix, robot, (f, reference), q, pt)
+    return _matrix(robot, f, reference, q, pt)
 
 
 def _matrix(robot: Robot, f: int, reference: str, q: jax.Array, pt) -> jax.Array:
@@ -164,7 +163,7 @@ def frame_jacobian(
     ((6, 6), (4, 4))
     """
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.jacobians.frame_jacobian")
-    return eager(_matrix_and_pose, robot, (f, reference), q, pt)
+    return _matrix_and_pose(robot, f, reference, q, pt)
 
 
 def _check_frame_call(robot, q, frame, point, reference, fn):
@@ -321,7 +320,7 @@ def _jacobian_from_derivs(p, R, dp, dR, reference):
 
 def _autodiff_jacobian(robot, q, frame, point, reference, mode, fn):
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, fn)
-    return eager(_autodiff_kernel, robot, (f, reference, mode), q, pt)
+    return _autodiff_kernel(robot, f, reference, mode, q, pt)
 
 
 def _autodiff_kernel(robot, f, reference, mode, q, pt):
@@ -408,7 +407,7 @@ def analytical_jacobian(
     if method not in ("chain", "jacfwd"):
         raise JaxkinError(f"method must be 'chain' or 'jacfwd', got {method!r}.")
     q, f, pt = _check_frame_call(robot, q, frame, point, "world_aligned", "jk.analytical_jacobian")
-    Ja, margin = eager(_analytical_kernel, robot, (f, representation, method), q, pt)
+    Ja, margin = analytical_jacobian_pass(robot, q, f, pt, representation, method)
     if return_margin:
         return Ja, margin
     return guard_singular(
@@ -421,10 +420,6 @@ def analytical_jacobian(
         robot,
         q,
     )
-
-
-def _analytical_kernel(robot, f, representation, method, q, pt):
-    return analytical_jacobian_pass(robot, q, f, pt, representation, method)
 
 
 def analytical_jacobian_pass(

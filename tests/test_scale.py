@@ -14,7 +14,7 @@ import pytest
 
 import jaxkin as jk
 import jaxkin.testing as jkt
-from jaxkin import _jit, batch, kinematics
+from jaxkin import batch, kinematics
 
 
 def _chain(n, seed=0, convention="standard", prismatic=True):
@@ -86,7 +86,6 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
     outs = []
     for threshold in (kinematics.SCAN_MIN_JOINTS, 10**9):
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", threshold)
-        _jit.eager_cache_clear()  # eager calls compile from the second: start each path afresh
         outs.append(
             [
                 jk.fk_all(robot, q),
