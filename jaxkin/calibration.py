@@ -419,12 +419,72 @@ def calibrate(
     f = robot.frame_index(frame)
     qs, Ts, guard = _check_data(robot, qs, Ts_measured, fn)
     qs, Ts = guard.clean(qs), guard.clean(Ts)
+    _check_fit_settings(fn, position_sigma, orientation_sigma, tol, max_steps)
+    identifiable = _check_identifiability(
+        robot, qs, masks, f, fn, position_sigma, orientation_sigma, check_identifiable
+    )
+    if optimizer is None:
+        optimizer = default_optimizer()
+    dtype = robot.dtype
+    wp = jnp.asarray(1.0 / position_sigma, dtype)
+    wo = jnp.asarray(1.0 / orientation_sigma, dtype)
+    theta, hist, k, converged = _fit(
+        robot,
+        qs,
+        Ts,
+        wp,
+        wo,
+        jnp.asarray(tol, dtype),
+        masks_key=_masks_key(masks),
+        f=f,
+        optimizer=optimizer,
+        max_steps=int(max_steps),
+    )
+    # Non-finite traced data (module doc): NaN parameters and history, not converged.
+    theta, hist = guard((theta, hist))
+    if guard.bad is not False:
+        converged = converged & ~guard.bad
+    before, after = _rms_errors(robot, qs, Ts, masks, f, theta)
+    std = _fit_std(robot, qs, Ts, masks, f, theta, wp, wo)
+    fitted = _apply(robot, masks, theta)
+    values, stds = _values_and_stds(fitted, masks, std, dtype)
+    return CalibrationResult(
+        robot=fitted,
+        params=values,
+        std=stds,
+        loss_history=hist,
+        steps=k,
+        converged=converged,
+        rms_position_before=before[0],
+        rms_position_after=after[0],
+        rms_orientation_before=before[1],
+        rms_orientation_after=after[1],
+        identifiable=jnp.asarray(identifiable),
+    )
+
+
+def _check_fit_settings(fn: str, position_sigma, orientation_sigma, tol, max_steps) -> None:
+    """Refuse non-positive sigmas, a negative tol and a max_steps that is no integer >= 1."""
     if not (position_sigma > 0 and orientation_sigma > 0):
         raise JaxkinError(f"{fn}: position_sigma and orientation_sigma must be > 0.")
     if not tol >= 0:
         raise JaxkinError(f"{fn}: tol must be a number >= 0, got {tol!r}.")
     if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
         raise JaxkinError(f"{fn}: max_steps must be an integer >= 1, got {max_steps!r}.")
+
+
+def _check_identifiability(
+    robot: Robot,
+    qs,
+    masks: dict[str, np.ndarray],
+    f: int,
+    fn: str,
+    position_sigma: float,
+    orientation_sigma: float,
+    check_identifiable: bool,
+) -> bool:
+    """The result's ``identifiable`` flag (False under a trace: not checked); raises
+    :class:`~jaxkin.JaxkinError` when ``check_identifiable`` and some parameter is not."""
     identifiable = False  # under a trace: not checked
     if check_identifiable or not is_traced(robot, qs):
         ident = identifiability(
@@ -444,29 +504,14 @@ def calibrate(
                 "(mask them out), or add measurements that excite them; check_identifiable=False "
                 "fits anyway (the fit then wanders along the unidentifiable directions)."
             )
-    if optimizer is None:
-        optimizer = default_optimizer()
+    return identifiable
+
+
+def _rms_errors(robot: Robot, qs, Ts, masks: dict[str, np.ndarray], f: int, theta):
+    """``(before, after)``: each the RMS position and orientation errors (unweighted) with the
+    nominal parameters and with the correction ``theta``."""
     masks_key = _masks_key(masks)
-    dtype = robot.dtype
-    wp = jnp.asarray(1.0 / position_sigma, dtype)
-    wo = jnp.asarray(1.0 / orientation_sigma, dtype)
-    theta, hist, k, converged = _fit(
-        robot,
-        qs,
-        Ts,
-        wp,
-        wo,
-        jnp.asarray(tol, dtype),
-        masks_key=masks_key,
-        f=f,
-        optimizer=optimizer,
-        max_steps=int(max_steps),
-    )
-    # Non-finite traced data (module doc): NaN parameters and history, not converged.
-    theta, hist = guard((theta, hist))
-    if guard.bad is not False:
-        converged = converged & ~guard.bad
-    one = jnp.ones((), dtype)
+    one = jnp.ones((), robot.dtype)
 
     def rms(th):
         rr = _residuals(robot, qs, Ts, th, one, one, masks_key=masks_key, f=f)
@@ -475,14 +520,23 @@ def calibrate(
             jnp.sqrt(jnp.mean(jnp.sum(rr[:, 3:] ** 2, axis=1))),
         )
 
-    before, after = rms(jnp.zeros_like(theta)), rms(theta)
-    # Predicted standard deviations: s^2 (A^T A)^-1, A the weighted regressor at the fit.
+    return rms(jnp.zeros_like(theta)), rms(theta)
+
+
+def _fit_std(robot: Robot, qs, Ts, masks: dict[str, np.ndarray], f: int, theta, wp, wo):
+    """Predicted standard deviations (P,) of the free parameters: the square roots of the
+    diagonal of ``s^2 (A^T A)^-1``, A the weighted regressor at the fit."""
+    masks_key = _masks_key(masks)
     r = _residuals(robot, qs, Ts, theta, wp, wo, masks_key=masks_key, f=f).reshape(-1)
     A = _regressor(robot, qs, theta, wp, wo, masks_key=masks_key, f=f)
     s2 = jnp.sum(r * r) / max(r.shape[0] - theta.shape[0], 1)
     cov = s2 * jnp.linalg.pinv(A.T @ A, hermitian=True)
-    std = jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
-    fitted = _apply(robot, masks, theta)
+    return jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
+
+
+def _values_and_stds(fitted: Robot, masks: dict[str, np.ndarray], std, dtype):
+    """The result's ``params`` and ``std`` dicts: each selected leaf of the fitted robot (the
+    (4, 4) transform for base/tool) and ``std`` (P,) spread over its free entries."""
     values: dict[str, jax.Array] = {}
     stds: dict[str, jax.Array] = {}
     kk = 0
@@ -495,19 +549,7 @@ def calibrate(
             values[name] = _leaf(fitted, name)
             stds[name] = jnp.zeros(m.shape, dtype).at[np.nonzero(m)].set(std[kk : kk + n])
         kk += n
-    return CalibrationResult(
-        robot=fitted,
-        params=values,
-        std=stds,
-        loss_history=hist,
-        steps=k,
-        converged=converged,
-        rms_position_before=before[0],
-        rms_position_after=after[0],
-        rms_orientation_before=before[1],
-        rms_orientation_after=after[1],
-        identifiable=jnp.asarray(identifiable),
-    )
+    return values, stds
 
 
 class _HashableMask:

@@ -258,7 +258,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"jaxkin {jk.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_robots_parser(sub)
+    _add_jacobian_parser(sub)
+    _add_velocities_parser(sub)
+    return parser
 
+
+def _add_frame_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--frame",
+        type=_frame,
+        default=None,
+        help="frame name or index (default: the tip, tool included)",
+    )
+
+
+def _add_reference_option(p: argparse.ArgumentParser, help_text: str) -> None:
+    p.add_argument("--reference", choices=REFERENCES, default="world_aligned", help=help_text)
+
+
+def _add_dtype_option(p: argparse.ArgumentParser, help_text: str) -> None:
+    p.add_argument("--dtype", choices=("float32", "float64"), default="float64", help=help_text)
+
+
+# ---------------------------------------------------------------------- parser: robots
+def _add_robots_parser(sub: Any) -> None:
     robots = sub.add_parser(
         "robots",
         help="list the robot zoo and the URDF robots that load by name",
@@ -272,6 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
     robots.add_argument("--zoo", action="store_true", help="list only the zoo")
     robots.set_defaults(handler=cmd_robots)
 
+
+# ---------------------------------------------------------------------- parser: jacobian
+def _add_jacobian_parser(sub: Any) -> None:
     jac = sub.add_parser(
         "jacobian",
         help="print the Jacobian of one configuration",
@@ -296,33 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument(
         "--config", metavar="NAME", help="a named configuration of a zoo robot (e.g. home, qr)"
     )
-    jac.add_argument(
-        "--frame",
-        type=_frame,
-        default=None,
-        help="frame name or index (default: the tip, tool included)",
-    )
-    jac.add_argument(
-        "--point",
-        nargs=3,
-        type=_real,
-        metavar=("X", "Y", "Z"),
-        help="the point whose velocity the linear rows give, as an offset from the frame's "
-        "origin in the frame's axes (m; default: the origin)",
-    )
-    jac.add_argument(
-        "--reference",
-        choices=REFERENCES,
-        default="world_aligned",
-        help="point and basis of a geometric Jacobian (default: %(default)s)",
-    )
-    jac.add_argument(
-        "--analytical",
-        choices=REPRESENTATIONS,
-        metavar="REPR",
-        help="print the analytical Jacobian d[p; phi]/dq instead, phi in REPR "
-        f"({', '.join(REPRESENTATIONS)})",
-    )
+    _add_frame_option(jac)
+    _add_jacobian_kind_options(jac)
     jac.add_argument(
         "--format",
         choices=("text", "csv", "json"),
@@ -336,13 +338,31 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"decimals in text output, 0 to {MAX_DIGITS} (default: %(default)s)",
     )
     _add_robot_options(jac)
+    _add_dtype_option(jac, "float precision (default: %(default)s)")
+
+
+def _add_jacobian_kind_options(jac: argparse.ArgumentParser) -> None:
+    """``--point``, ``--reference`` and ``--analytical``: which Jacobian to print."""
     jac.add_argument(
-        "--dtype",
-        choices=("float32", "float64"),
-        default="float64",
-        help="float precision (default: %(default)s)",
+        "--point",
+        nargs=3,
+        type=_real,
+        metavar=("X", "Y", "Z"),
+        help="the point whose velocity the linear rows give, as an offset from the frame's "
+        "origin in the frame's axes (m; default: the origin)",
+    )
+    _add_reference_option(jac, "point and basis of a geometric Jacobian (default: %(default)s)")
+    jac.add_argument(
+        "--analytical",
+        choices=REPRESENTATIONS,
+        metavar="REPR",
+        help="print the analytical Jacobian d[p; phi]/dq instead, phi in REPR "
+        f"({', '.join(REPRESENTATIONS)})",
     )
 
+
+# ---------------------------------------------------------------------- parser: velocities
+def _add_velocities_parser(sub: Any) -> None:
     vel = sub.add_parser(
         "velocities",
         help="batched Jacobians and end-effector twists of sampled configurations",
@@ -364,6 +384,14 @@ def build_parser() -> argparse.ArgumentParser:
         help=_ROBOT_HELP + " (default: %(default)s)",
     )
     _add_robot_options(vel)
+    _add_velocities_input_options(vel)
+    _add_velocities_output_options(vel)
+    _add_velocities_kernel_options(vel)
+
+
+def _add_velocities_input_options(vel: argparse.ArgumentParser) -> None:
+    """Where the configurations come from and how they are run: ``--n``/``--configurations``,
+    ``--seed``, ``--chunk-size``, ``--dtype``."""
     count = vel.add_mutually_exclusive_group()
     count.add_argument(
         "--n",
@@ -386,12 +414,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=CLI_CHUNK_SIZE,
         help=f"configurations per compiled call, at most {MAX_CHUNK:,} (default: %(default)s)",
     )
-    vel.add_argument(
-        "--dtype",
-        choices=("float32", "float64"),
-        default="float64",
-        help="float precision (default: %(default)s; float64 enables jax_enable_x64 for this run)",
+    _add_dtype_option(
+        vel, "float precision (default: %(default)s; float64 enables jax_enable_x64 for this run)"
     )
+
+
+def _add_velocities_output_options(vel: argparse.ArgumentParser) -> None:
+    """Where the results go: ``--output``/``--no-output`` and ``--format``."""
     out = vel.add_mutually_exclusive_group()
     out.add_argument(
         "--output",
@@ -406,17 +435,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="output format (default: from the --output suffix, else npz; see below)",
     )
-    vel.add_argument(
-        "--frame",
-        type=_frame,
-        default=None,
-        help="frame name or index (default: the tip, tool included)",
-    )
-    vel.add_argument(
-        "--reference",
-        choices=REFERENCES,
-        default="world_aligned",
-        help="point and basis of J and the twist (default: %(default)s: frame origin, world axes)",
+
+
+def _add_velocities_kernel_options(vel: argparse.ArgumentParser) -> None:
+    """What is computed per configuration (``--frame``, ``--reference``, ``--representation``,
+    ``--qd-scale``, ``--singular-tol``) and ``--progress``."""
+    _add_frame_option(vel)
+    _add_reference_option(
+        vel, "point and basis of J and the twist (default: %(default)s: frame origin, world axes)"
     )
     vel.add_argument(
         "--representation",
@@ -444,7 +470,6 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help=f"progress bar on stderr (default: on for N >= {PROGRESS_MIN_N:,} on a terminal)",
     )
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -611,47 +611,15 @@ def solve_ik(
     at the solution.
     """
     fn = "jk.solve_ik"
-    if method not in METHODS:
-        raise JaxkinError(f"{fn}: method must be one of {METHODS}, got {method!r}.")
-    for name, val, lo in (
-        ("max_steps", max_steps, 1),
-        ("num_seeds", 1 if num_seeds is None else num_seeds, 1),
-        ("patience", patience, 1),
-    ):
-        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-            raise JaxkinError(f"{fn}: {name} must be an integer >= {lo}, got {val!r}.")
+    _check_settings(fn, method, max_steps, num_seeds, patience)
     check_robot(robot, fn)
     f = robot.frame_index(frame)
     dtype = np.dtype(robot.dtype)
     T, batched = check_poses(T_target, fn, "T_target", dtype)
     N = T.shape[0] if batched else 1
-    q0 = jnp.asarray(q0) if hasattr(q0, "shape") else np.asarray(q0, dtype=float)
-    if not (batched and tuple(q0.shape) == (N, robot.dof)):
-        q0 = check_q(robot, q0, what="q0", fn=fn)
-    if not is_traced(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
-        raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
-    if seeds is not None:
-        shape = tuple(jnp.shape(seeds))
-        if not (
-            (len(shape) == 2 and shape[1] == robot.dof)
-            or (len(shape) == 3 and shape[0] == N and shape[2] == robot.dof)
-        ):
-            raise ShapeError(
-                f"{fn}: seeds must have shape (S, {robot.dof}) (the same extra starts for every "
-                f"target) or ({N}, S, {robot.dof}), got {shape}."
-            )
-        if num_seeds is not None:
-            raise JaxkinError(f"{fn}: give seeds= or num_seeds=, not both.")
-        seeds = jnp.asarray(seeds) if hasattr(seeds, "shape") else np.asarray(seeds, dtype=float)
-        if seeds.shape[-2] == 0:
-            seeds = None
-            num_seeds = 1
-    if seeds is not None:
-        S = 1 + int(seeds.shape[-2])
-    elif num_seeds is not None:
-        S = int(num_seeds)
-    else:
-        S = DEFAULT_NUM_SEEDS if method == "lm" else 1
+    q0 = _check_q0(robot, q0, batched, N, fn)
+    seeds, num_seeds = _check_seeds(robot, seeds, num_seeds, N, fn)
+    S = _num_starts(seeds, num_seeds, method)
     if tol is None:
         tol = 1e-10 if dtype == np.float64 else 1e-5
     if not tol > 0:
@@ -678,6 +646,60 @@ def solve_ik(
     if throw:
         _raise_if_failed(sol)
     return sol
+
+
+def _check_settings(fn: str, method: str, max_steps, num_seeds, patience) -> None:
+    """Refuse an unknown method and counts that are not integers >= 1."""
+    if method not in METHODS:
+        raise JaxkinError(f"{fn}: method must be one of {METHODS}, got {method!r}.")
+    for name, val, lo in (
+        ("max_steps", max_steps, 1),
+        ("num_seeds", 1 if num_seeds is None else num_seeds, 1),
+        ("patience", patience, 1),
+    ):
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
+            raise JaxkinError(f"{fn}: {name} must be an integer >= {lo}, got {val!r}.")
+
+
+def _check_q0(robot: Robot, q0: Any, batched: bool, N: int, fn: str):
+    """``q0`` as (dof,) or, for a batch, (N, dof); refused when concrete and not finite."""
+    q0 = jnp.asarray(q0) if hasattr(q0, "shape") else np.asarray(q0, dtype=float)
+    if not (batched and tuple(q0.shape) == (N, robot.dof)):
+        q0 = check_q(robot, q0, what="q0", fn=fn)
+    if not is_traced(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
+        raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
+    return q0
+
+
+def _check_seeds(robot: Robot, seeds: Any, num_seeds: int | None, N: int, fn: str):
+    """``(seeds, num_seeds)`` checked: seeds (S, dof) or (N, S, dof), not with num_seeds; no
+    seeds at all (S == 0) becomes ``(None, 1)``."""
+    if seeds is None:
+        return seeds, num_seeds
+    shape = tuple(jnp.shape(seeds))
+    if not (
+        (len(shape) == 2 and shape[1] == robot.dof)
+        or (len(shape) == 3 and shape[0] == N and shape[2] == robot.dof)
+    ):
+        raise ShapeError(
+            f"{fn}: seeds must have shape (S, {robot.dof}) (the same extra starts for every "
+            f"target) or ({N}, S, {robot.dof}), got {shape}."
+        )
+    if num_seeds is not None:
+        raise JaxkinError(f"{fn}: give seeds= or num_seeds=, not both.")
+    seeds = jnp.asarray(seeds) if hasattr(seeds, "shape") else np.asarray(seeds, dtype=float)
+    if seeds.shape[-2] == 0:
+        return None, 1
+    return seeds, num_seeds
+
+
+def _num_starts(seeds: Any, num_seeds: int | None, method: str) -> int:
+    """Starts per target: ``q0`` and the given seeds, else ``num_seeds``, else the default."""
+    if seeds is not None:
+        return 1 + int(seeds.shape[-2])
+    if num_seeds is not None:
+        return int(num_seeds)
+    return DEFAULT_NUM_SEEDS if method == "lm" else 1
 
 
 _POOL = 4096
