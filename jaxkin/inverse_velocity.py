@@ -38,7 +38,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import spatial
 from ._checks import (
     check_J,
     check_J_and_vector,
@@ -51,7 +50,6 @@ from ._checks import (
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
-from .kinematics import forward_pass
 from .model import Robot
 from .pose_errors import pose_error
 
@@ -335,11 +333,15 @@ def _resolved_rate_impl(robot, q0, Ts, Vs, dt, gain, damping, *, frame, rcond, c
     if Vs is None:
         Vs = _path_twists(Ts, dt)
 
+    def pose(q):
+        return jacobian_pass(robot, q, frame, None, "world_aligned")  # J and pose: one pass
+
     def step(q, x):
-        Td, Vd, Td_next = x
-        g = jacobian_pass(robot, q, frame, None, "world_aligned")  # J and pose from one pass
-        J, T = g.matrix(), g.pose()
-        V = Vd + gain * pose_error(T, Td)
+        Td, Vd = x
+        g = pose(q)
+        J = g.matrix()
+        e = pose_error(g.pose(), Td)  # also the error of the pose reached by the step before
+        V = Vd + gain * e
         if rcond is None:
             qd = _dls_solve(J, V, damping * damping)
         else:
@@ -347,13 +349,14 @@ def _resolved_rate_impl(robot, q0, Ts, Vs, dt, gain, damping, *, frame, rcond, c
         q_next = q + dt * qd
         if clip_to_limits:
             q_next = jnp.clip(q_next, lo, hi)
-        fp2 = forward_pass(robot, q_next)
-        T2 = spatial.make_transform(fp2.R[frame], fp2.p[frame])
-        e = pose_error(T2, Td_next)
         return q_next, (q_next, qd, safe_norm(e[:3]), safe_norm(e[3:]))
 
-    Ts_next = jnp.concatenate([Ts[1:], Ts[-1:]], axis=0)
-    _, (qs, qds, ep, eo) = jax.lax.scan(step, q0, (Ts, Vs, Ts_next))
+    q_end, (qs, qds, ep, eo) = jax.lax.scan(step, q0, (Ts, Vs))
+    # errors after step k: of q_{k+1} against T_path[k + 1] (the last pose for the last step);
+    # the scan measured q_k against T_path[k], so shift by one and measure q_N once more
+    e_end = pose_error(pose(q_end).pose(), Ts[-1])
+    ep = jnp.concatenate([ep[1:], safe_norm(e_end[:3])[None]])
+    eo = jnp.concatenate([eo[1:], safe_norm(e_end[3:])[None]])
     q = jnp.concatenate([q0[None], qs], axis=0)
     return ResolvedRateResult(q, qds, ep, eo, jnp.max(ep), jnp.max(eo))
 
