@@ -53,7 +53,7 @@ def error_if(bad: Any, error: Callable[[], Exception], value: Any, *trees: Any) 
         if bool(np.any(np.asarray(bad))):
             raise error()
         return value
-    return jax.tree_util.tree_map(lambda v: jnp.where(bad, jnp.full_like(v, jnp.nan), v), value)
+    return FiniteGuard(jnp.asarray(bad))(value)
 
 
 class FiniteGuard:
@@ -150,6 +150,18 @@ def _numeric(x: Any, what: str, fn: str) -> None:
         raise ShapeError(f"{fn}: {what} must be an array of numbers, got dtype {x.dtype}.")
 
 
+def _batch_hint(what: str, code: str) -> str:
+    """The sentence suggesting ``code`` (which must run when pasted) for a batch of ``what``."""
+    how = "use jax.vmap, e.g." if code.startswith("jax.vmap") else "use, e.g."
+    return f" For a batch of {what} {how} {code}."
+
+
+def _float_array(x: Any, dtype: Any) -> jax.Array:
+    """``x`` as a JAX array; integer and boolean input becomes ``dtype``."""
+    x = jnp.asarray(x)
+    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(dtype)
+
+
 def check_robot(robot: Any, fn: str) -> Robot:
     if not isinstance(robot, Robot):
         raise ShapeError(
@@ -178,19 +190,16 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", ba
     if shape != (robot.dof,):
         hint = ""
         if len(shape) >= 2 and shape[-1] == robot.dof:
-            code = batch_hint or f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
-            how = "use jax.vmap, e.g." if code.startswith("jax.vmap") else "use, e.g."
-            hint = f" For a batch of configurations {how} {code}."
+            hint = _batch_hint(
+                "configurations", batch_hint or f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
+            )
         elif len(shape) == 1:
             hint = f" Give one value per joint {list(robot.joint_names)}."
         raise ShapeError(
             f"{fn}: {what} must have shape ({robot.dof},) for robot {robot.name!r} "
             f"({robot.dof} joints), got shape {shape}.{hint}"
         )
-    q = jnp.asarray(q)
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = q.astype(robot.dtype)
-    return q
+    return _float_array(q, robot.dtype)
 
 
 def check_vector(x: Any, n: int, what: str, fn: str, meaning: str, hint: str = "") -> Any:
@@ -231,16 +240,12 @@ def check_J(J: Any, fn: str, batch_hint: str | None = None) -> jax.Array:
     if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
         hint = ""
         if len(shape) == 3:
-            code = batch_hint or f"jax.vmap({fn})(Js)"
-            hint = f" For a batch of Jacobians use jax.vmap, e.g. {code}."
+            hint = _batch_hint("Jacobians", batch_hint or f"jax.vmap({fn})(Js)")
         raise ShapeError(
             f"{fn}: J must have shape (m, dof) (e.g. (6, dof) from jk.geometric_jacobian), got "
             f"shape {shape}.{hint}"
         )
-    J = jnp.asarray(J)
-    if not jnp.issubdtype(J.dtype, jnp.floating):
-        J = J.astype(jnp.result_type(float))
-    return J
+    return _float_array(J, jnp.result_type(float))
 
 
 def check_J_and_vector(
