@@ -53,16 +53,22 @@ DEFAULT_CHUNK_SIZE = 65536
 
 # ---------------------------------------------------------------------- progress bar
 class ProgressBar:
-    """A minimal progress bar on stderr: done/total, percent, rate and ETA.
+    """A progress bar for chunked work: a thin wrapper of ``tqdm.auto.tqdm``.
 
-    Redraws at most every ``min_interval`` seconds (and once at the end). It is silent when
-    ``enabled`` is False, or when the stream is not a terminal unless ``force`` is True.
-    Use it as a context manager, or call :meth:`close` when done::
+    tqdm is optional (``pip install "jaxkin[progress]"``): without it the bar is silent and
+    raises nothing. With it, the bar draws on ``file`` (default stderr) in a terminal and as a
+    widget or text in Jupyter. It is silent when ``enabled`` is False, and on a stream that is not
+    a terminal (outside Jupyter) unless ``force`` is True. ``min_interval``: seconds between
+    redraws; ``width``: the line's width in characters (default: the terminal's). Use it as a
+    context manager, or call :meth:`close` when done::
 
         with ProgressBar(total=n, desc="q") as bar:
             for chunk in chunks:
                 ...
                 bar.update(len(chunk))
+
+    ``chunked_map(progress=True)`` makes one, forced on. Any tqdm instance can be passed as
+    ``progress`` instead.
     """
 
     def __init__(
@@ -75,53 +81,51 @@ class ProgressBar:
         force: bool = False,
         file: TextIO | None = None,
         min_interval: float = 0.1,
-        width: int = 24,
+        width: int | None = None,
     ) -> None:
         self.total = int(total)
-        self.desc = desc
-        self.unit = unit
-        self.file = sys.stderr if file is None else file
-        self.min_interval = float(min_interval)
-        self.width = int(width)
         self.done = 0
-        isatty = getattr(self.file, "isatty", None)
-        tty = bool(isatty()) if callable(isatty) else False
-        self.active = bool(enabled) and (tty or bool(force))
-        self._start = time.perf_counter()
-        self._last_draw = -math.inf
-        self._drawn = -1  # ``done`` at the last redraw
-        self._width_drawn = 0  # length of the line on screen
-        self._closed = False
+        self.file = file
+        tqdm = _tqdm_class() if enabled else None
+        self.bar = None
+        if tqdm is not None:
+            self.bar = tqdm(
+                total=self.total,
+                desc=desc or None,
+                unit=unit,
+                disable=False if force else None,  # None: silent off a terminal (tqdm's rule)
+                file=file,
+                mininterval=float(min_interval),
+                ncols=width,
+            )
+
+    @property
+    def active(self) -> bool:
+        """Whether anything is drawn (tqdm installed, enabled, on a terminal or forced)."""
+        return self.bar is not None and not self.bar.disable
 
     def note(self, text: str) -> None:
-        """Show ``text`` in place of the bar until the next redraw (e.g. "compiling")."""
-        if self.active:
-            self._write(f"{self.desc} {text}" if self.desc else text)
+        """Show ``text`` after the bar until :meth:`start` (e.g. "compiling")."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(text)
 
     def start(self) -> None:
-        """Restart the clock (e.g. after a compile the rate should not include) and draw."""
-        self._start = time.perf_counter()
-        if self.active:
-            self._draw(self._start)
+        """Clear the note and restart the clock (the rate should not include a compile)."""
+        if self.bar is not None:
+            self.bar.set_postfix_str("", refresh=False)
+            self.bar.reset()
+            self.bar.update(self.done)
 
     def update(self, n: int = 1) -> None:
-        """Count ``n`` more items done; redraw if the last redraw is old enough."""
+        """Count ``n`` more items done."""
         self.done += int(n)
-        if self.active:
-            now = time.perf_counter()
-            if now - self._last_draw >= self.min_interval or self.done >= self.total:
-                self._draw(now)
+        if self.bar is not None:
+            self.bar.update(int(n))
 
     def close(self) -> None:
         """Draw the final state and end the line (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        if self.active:
-            if self._drawn != self.done:
-                self._draw(time.perf_counter())
-            self.file.write("\n")
-            self.file.flush()
+        if self.bar is not None:
+            self.bar.close()
 
     def __enter__(self) -> ProgressBar:
         return self
@@ -129,42 +133,14 @@ class ProgressBar:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def _draw(self, now: float) -> None:
-        self._last_draw = now
-        self._drawn = self.done
-        elapsed = max(now - self._start, 1e-9)
-        frac = min(self.done / self.total, 1.0) if self.total > 0 else 1.0
-        filled = round(frac * self.width)
-        rate = self.done / elapsed
-        remaining = (self.total - self.done) / rate if rate > 0 else math.inf
-        desc = f"{self.desc} " if self.desc else ""
-        self._write(
-            f"{desc}[{'#' * filled}{'.' * (self.width - filled)}] "
-            f"{self.done:,}/{self.total:,} {100 * frac:5.1f}% "
-            f"{_si(rate)} {self.unit}/s ETA {_duration(remaining)}"
-        )
 
-    def _write(self, line: str) -> None:
-        # Back to the start of the line; blank out what is left of a longer previous line.
-        self.file.write(f"\r{line}{' ' * max(self._width_drawn - len(line), 0)}")
-        self.file.flush()
-        self._width_drawn = len(line)
-
-
-def _si(x: float) -> str:
-    for factor, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
-        if x >= factor:
-            return f"{x / factor:.2f}{suffix}"
-    return f"{x:.1f}"
-
-
-def _duration(seconds: float) -> str:
-    if not math.isfinite(seconds):
-        return "--:--"
-    s = round(seconds)
-    h, rest = divmod(s, 3600)
-    m, s = divmod(rest, 60)
-    return f"{h}:{m:02d}:{s:02d}" if h else f"{m:02d}:{s:02d}"
+def _tqdm_class() -> Any:
+    """``tqdm.auto.tqdm`` (a notebook widget in Jupyter, text elsewhere), or None without tqdm."""
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None
+    return tqdm
 
 
 # ---------------------------------------------------------------------- chunked map
@@ -195,7 +171,7 @@ def chunked_map(
     fn: Callable[..., Any],
     *arrays: Any,
     chunk_size: int = DEFAULT_CHUNK_SIZE,
-    progress: bool | ProgressBar = False,
+    progress: Any = False,
     out: Any = None,
     return_stats: bool = False,
     devices: Any = None,
@@ -218,8 +194,11 @@ def chunked_map(
         ``source[start:stop]``), so inputs larger than memory stream too.
       chunk_size: most rows per compiled call (>= 1). Memory on the device is about ``c``
         times the per-row footprint of ``fn``'s intermediates; the default suits a CPU.
-      progress: True for a :class:`ProgressBar` on stderr (shown on a terminal only), or a
-        :class:`ProgressBar` to update (its ``total`` should be ``N``).
+      progress: True for a tqdm bar on stderr, in a terminal or in Jupyter; nothing is shown
+        and nothing raised when tqdm is not installed (``pip install "jaxkin[progress]"``). Or a
+        bar to update by the rows done: a :class:`ProgressBar` (shows the compile, then closed
+        at the end) or any object with ``update(n)`` such as a ``tqdm`` instance (not closed;
+        its ``total`` should be ``N``).
       out: where results go:
 
         * a pytree of writable arrays (e.g. ``np.memmap``) with the structure of ``fn``'s output
@@ -258,7 +237,7 @@ def chunked_map(
     mesh = _mesh(devices)
     chunk, n_chunks = _chunking(chunk_size, n, mesh.size)
 
-    bar = progress if isinstance(progress, ProgressBar) else ProgressBar(n, enabled=bool(progress))
+    bar = _bar(progress, n)
     try:
         t0 = time.perf_counter()
         traced = _trace(fn, host, chunk, mesh)
@@ -296,6 +275,32 @@ def chunked_map(
         run_seconds=run_seconds,
     )
     return results, stats
+
+
+def _bar(progress: Any, n: int) -> ProgressBar:
+    """The :class:`ProgressBar` that ``chunked_map`` drives for its ``progress`` argument."""
+    if isinstance(progress, ProgressBar):
+        return progress
+    if isinstance(progress, bool) or progress is None:
+        return ProgressBar(n, enabled=bool(progress), force=True)
+    if not callable(getattr(progress, "update", None)):
+        raise JaxkinError(
+            "chunked_map: progress must be True, False, a ProgressBar or an object with an "
+            f"update(n) method such as a tqdm bar, got {type(progress).__name__}."
+        )
+    return _Forward(progress)
+
+
+class _Forward(ProgressBar):
+    """Forwards the rows done to a caller's bar (a tqdm instance...), which it never closes."""
+
+    def __init__(self, target: Any) -> None:
+        super().__init__(0, enabled=False)
+        self.target = target
+
+    def update(self, n: int = 1) -> None:
+        super().update(n)
+        self.target.update(int(n))
 
 
 @contextlib.contextmanager

@@ -468,7 +468,10 @@ def _add_velocities_kernel_options(vel: argparse.ArgumentParser) -> None:
         "--progress",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help=f"progress bar on stderr (default: on for N >= {PROGRESS_MIN_N:,} on a terminal)",
+        help=(
+            f"progress bar on stderr (default: on for N >= {PROGRESS_MIN_N:,} on a terminal); "
+            'needs tqdm: pip install "jaxkin[progress]"'
+        ),
     )
 
 

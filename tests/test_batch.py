@@ -1,6 +1,7 @@
 """jaxkin.batch: chunked_map against one plain vmap, compile-once, validation, out=, progress."""
 
 import io
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -177,43 +178,57 @@ class FakeTTY(io.StringIO):
         return True
 
 
-def test_progress_bar_draws_on_tty_and_when_forced():
+def test_progress_true_shows_a_tqdm_bar_that_reaches_n(capsys):
+    pytest.importorskip("tqdm")
+    x, y = inputs(10)
+    assert_tree_equal(chunked_map(row_fn, x, y, chunk_size=4, progress=True), reference(x, y))
+    err = capsys.readouterr().err  # tqdm writes to stderr, even off a terminal when asked
+    assert "10/10" in err and "100%" in err and err.endswith("\n")
+
+
+def test_progress_updates_a_tqdm_instance_and_leaves_it_open():
+    tqdm = pytest.importorskip("tqdm")
+    stream = io.StringIO()
+    x, y = inputs(10)
+    with tqdm.tqdm(total=10, file=stream, disable=False, mininterval=0) as bar:
+        chunked_map(row_fn, x, y, chunk_size=4, progress=bar)
+        assert bar.n == 10 and not bar.disable  # counted, not closed
+    assert "10/10" in stream.getvalue()
+
+
+def test_progress_bar_wraps_tqdm():
+    pytest.importorskip("tqdm")
+    x, y = inputs(10)
     for stream, force in ((FakeTTY(), False), (io.StringIO(), True)):
         bar = ProgressBar(10, "work", unit="cfg", file=stream, force=force, min_interval=0)
-        x, y = inputs(10)
         chunked_map(row_fn, x, y, chunk_size=4, progress=bar)
         text = stream.getvalue()
-        assert "work" in text and "10/10" in text and "100.0%" in text and "cfg/s" in text
-        assert "4/10" in text and text.endswith("\n")
-
-
-def test_progress_bar_silent():
+        assert bar.done == 10 and "work" in text and "10/10" in text and "cfg/s" in text
+        assert "compiling" in text and text.endswith("\n")  # the compile note, then closed
     for bar in (
         ProgressBar(10, file=io.StringIO()),  # not a terminal, not forced
         ProgressBar(10, file=FakeTTY(), enabled=False),
     ):
         bar.update(10)
         bar.close()
-        assert bar.file.getvalue() == ""
+        assert not bar.active and bar.file.getvalue() == ""
 
 
-def test_progress_bar_rate_limited():
-    stream = FakeTTY()
-    with ProgressBar(1000, file=stream, min_interval=3600) as bar:
-        for _ in range(999):
-            bar.update(1)
-        assert stream.getvalue().count("\r") == 1  # the first update only
-        bar.update(1)  # the last one always draws
-    assert stream.getvalue().count("\r") == 2  # close does not repeat it
-    assert stream.getvalue().count("\n") == 1
+def test_progress_without_tqdm_shows_nothing_and_raises_nothing(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "tqdm.auto", None)  # import tqdm.auto raises ImportError
+    x, y = inputs(10)
+    assert_tree_equal(chunked_map(row_fn, x, y, chunk_size=4, progress=True), reference(x, y))
+    bar = ProgressBar(10, force=True, file=FakeTTY())
+    with bar:
+        bar.update(10)
+    assert not bar.active and bar.done == 10 and bar.file.getvalue() == ""
+    assert capsys.readouterr().err == ""
 
 
-def test_progress_bar_close_draws_unfinished_state():
-    stream = FakeTTY()
-    with ProgressBar(10, file=stream, min_interval=3600) as bar:
-        bar.update(3)
-        bar.update(2)  # not drawn (too soon)
-    assert "5/10" in stream.getvalue() and stream.getvalue().endswith("\n")
+def test_progress_refuses_what_is_not_a_bar():
+    x, y = inputs(3)
+    with pytest.raises(jk.JaxkinError, match="update"):
+        chunked_map(row_fn, x, y, progress="yes")
 
 
 # ---------------------------------------------------------------------- streams and sources
