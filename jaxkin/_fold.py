@@ -144,7 +144,10 @@ def materialize(x: Scalar, dtype) -> jax.Array:
 
 
 def stack_matrix(rows, dtype) -> jax.Array:
-    """Stack a nested list/tuple of scalars into one array of ``dtype``."""
+    """Stack a nested list/tuple of scalars into one array of ``dtype`` (an empty list is a
+    (0,) array: the rows of a (6, 0) Jacobian of a robot with no moving joint)."""
+    if isinstance(rows, (tuple, list)) and len(rows) == 0:
+        return jnp.zeros((0,), dtype)
     if isinstance(rows, (tuple, list)):
         return jnp.stack([stack_matrix(r, dtype) for r in rows])
     return materialize(rows, dtype)

@@ -20,7 +20,14 @@ import numpy as np
 from .errors import JaxkinPrecisionWarning, ModelError
 from .model import JOINT_KINDS, Robot
 
-__all__ = ["MimicError", "from_dh", "from_joints", "resolve_dtype", "resolve_mimics"]
+__all__ = [
+    "MimicError",
+    "from_dh",
+    "from_joints",
+    "resolve_dtype",
+    "resolve_mimics",
+    "rotation_to_rpy",
+]
 
 _DH_CONVENTIONS = {"standard": "dh_standard", "modified": "dh_modified"}
 
@@ -170,7 +177,12 @@ def from_joints(
         joint moves), optional ``parent`` (a frame name; default: the previous joint's child),
         ``xyz`` and ``rpy`` (the joint origin in the parent frame, URDF fixed-axis roll-pitch-
         yaw ``R = Rz(y) Ry(p) Rx(r)``; default zeros), ``axis`` (in the joint frame, normalised;
-        default (1, 0, 0) as in URDF), ``lower``, ``upper``, ``mimic``.
+        default (1, 0, 0) as in URDF), ``lower``, ``upper``, ``mimic``. Instead of ``rpy`` the
+        origin's rotation may be ``quat``, a quaternion ``(w, x, y, z)`` (scalar first, MuJoCo's
+        order; normalised), and instead of ``xyz`` and ``rpy`` the whole origin may be
+        ``transform``, a 4x4 homogeneous ``T_parent_joint``: exactly one form per joint. Both are
+        stored as ``xyz``/``rpy`` (:func:`rotation_to_rpy`: exact to rounding, gimbal lock too).
+        An empty ``joints`` gives a robot whose only frame is ``root`` (dof 0).
       root: the name of the base frame.
       base, tool, name, dtype: as in :meth:`from_dh`.
 
@@ -211,8 +223,8 @@ def from_joints(
     >>> float(jk.fk(robot, [0.0, 0.0])[0, 3])  # stretched along x: the hand at x = 2
     2.0
     """
-    if isinstance(joints, Mapping) or not isinstance(joints, Sequence) or len(joints) == 0:
-        raise ModelError("joints must be a non-empty sequence of mappings, one per joint.")
+    if isinstance(joints, Mapping) or not isinstance(joints, Sequence):
+        raise ModelError("joints must be a sequence of mappings, one per joint.")
     dt = resolve_dtype(dtype)
     frame_names = [str(root)]
     frame_of = {str(root): 0}  # name -> frame index (O(1) lookups for long chains)
@@ -225,15 +237,15 @@ def from_joints(
     axes = [s.axis for s in specs]
     parents = [s.parent for s in specs]
     q_index, multiplier, offset, joint_names, lowers, uppers = _drive(specs, leaders)
-    params = {
-        "xyz": jnp.asarray(np.array(xyz), dtype=dt),
-        "rpy": jnp.asarray(np.array(rpy), dtype=dt),
+    params = {  # reshape: a robot with no joint at all (only its root frame) has (0, 3) leaves
+        "xyz": jnp.asarray(np.array(xyz, dtype=float).reshape(-1, 3), dtype=dt),
+        "rpy": jnp.asarray(np.array(rpy, dtype=float).reshape(-1, 3), dtype=dt),
     }
     return _build(
         name=name or "robot",
         parameterisation="placement",
         params=params,
-        axis=np.array(axes),
+        axis=np.array(axes, dtype=float).reshape(-1, 3),
         kinds=kinds,
         parents=parents,
         q_index=q_index,
@@ -250,7 +262,20 @@ def from_joints(
     )
 
 
-_JOINT_KEYS = {"name", "type", "child", "parent", "xyz", "rpy", "axis", "lower", "upper", "mimic"}
+_JOINT_KEYS = {
+    "name",
+    "type",
+    "child",
+    "parent",
+    "xyz",
+    "rpy",
+    "quat",
+    "transform",
+    "axis",
+    "lower",
+    "upper",
+    "mimic",
+}
 
 
 class _Joint(NamedTuple):
@@ -304,16 +329,83 @@ def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
         mimic = _mimic_spec(mimic, where)
     if kind != "fixed":
         limits = _limits(spec, where)
+    xyz, rpy = _placement(spec, where)
     return _Joint(
         name=jname,
         kind=kind,
         parent=frame_of[parent_name],
-        xyz=_vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'"),
-        rpy=_vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'"),
+        xyz=xyz,
+        rpy=rpy,
         axis=_unit_axis(spec.get("axis", (1.0, 0.0, 0.0)), kind, where),
         limits=limits,
         mimic=mimic,
     )
+
+
+def _placement(spec: Mapping[str, Any], where: str) -> tuple[np.ndarray, np.ndarray]:
+    """A joint's origin as stored: ``(xyz, rpy)``, from ``xyz``/``rpy``, ``xyz``/``quat`` or
+    ``transform`` (exactly one orientation form)."""
+    forms = [k for k in ("rpy", "quat", "transform") if k in spec]
+    if len(forms) > 1 or ("transform" in spec and "xyz" in spec):
+        given = sorted(k for k in ("xyz", "rpy", "quat", "transform") if k in spec)
+        raise ModelError(
+            f"{where} gives its placement twice ({given}); give exactly one form: xyz and rpy, "
+            "xyz and quat (w, x, y, z), or transform (4x4)."
+        )
+    if "transform" in spec:
+        T = _transform(spec["transform"], f"{where}, key 'transform'")
+        return T[:3, 3].copy(), rotation_to_rpy(T[:3, :3])
+    xyz = _vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'")
+    if "quat" in spec:
+        return xyz, rotation_to_rpy(_quat_matrix(spec["quat"], f"{where}, key 'quat'"))
+    return xyz, _vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'")
+
+
+def _quat_matrix(value: Any, where: str) -> np.ndarray:
+    """The rotation matrix of a quaternion ``(w, x, y, z)`` (scalar first, MuJoCo's order),
+    normalised in float64 first (as MuJoCo's compiler does)."""
+    try:
+        q = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where} must be 4 numbers (w, x, y, z), got {value!r}.") from None
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise ModelError(f"{where} must be 4 finite numbers (w, x, y, z), got {value!r}.")
+    norm = math.hypot(*(float(x) for x in q))
+    if norm == 0.0:
+        raise ModelError(f"{where} is the zero quaternion; give a rotation, e.g. (1, 0, 0, 0).")
+    w, x, y, z = q / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rotation_to_rpy(R: Any) -> np.ndarray:
+    """Roll, pitch, yaw (``R = Rz(yaw) Ry(pitch) Rx(roll)``) of a 3x3 rotation, in float64 on
+    the host: yaw from the first column, then roll and pitch from ``Rz(-yaw) R = Ry(pitch)
+    Rx(roll)``, whose entries stay of order one, so the angles rebuild ``R`` to rounding (about
+    1e-16) everywhere, at and near gimbal lock (pitch = +-pi/2; yaw is 0 where the first
+    column has no x, y component at all) too.
+
+    >>> import numpy as np
+    >>> from jaxkin.build import rotation_to_rpy
+    >>> rotation_to_rpy(np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]))  # pitch = pi/2
+    array([0.        , 1.57079633, 0.        ])
+    """
+    R = np.asarray(R, dtype=np.float64)
+    c = math.hypot(R[0, 0], R[1, 0])
+    yaw = math.atan2(R[1, 0], R[0, 0]) if c > 0.0 else 0.0
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    # Rz(-yaw) R = Ry(pitch) Rx(roll) = [[cp, sp sr, sp cr], [0, cr, -sr], [-sp, cp sr, cp cr]]
+    r00 = cy * R[0, 0] + sy * R[1, 0]
+    r11 = -sy * R[0, 1] + cy * R[1, 1]
+    r12 = -sy * R[0, 2] + cy * R[1, 2]
+    roll = math.atan2(-r12, r11)
+    pitch = math.atan2(-R[2, 0], r00)
+    return np.array([roll, pitch, yaw]) + 0.0  # no -0.0
 
 
 def _unit_axis(value: Any, kind: str, where: str) -> np.ndarray:
@@ -369,9 +461,7 @@ def _drive(joints: list[_Joint], leaders: Sequence[Mapping[str, Any]]):
         if j.kind != "fixed":
             driver, multiplier[i], offset[i] = resolved.get(j.name, (j.name, 1.0, 0.0))
             q_index[i] = q_of[driver]
-    names = list(q_of)
-    if not names:
-        raise ModelError("the robot has no moving joint (all joints are fixed).")
+    names = list(q_of)  # empty for a robot with no moving joint (dof 0)
     lower = [limits[k][0] for k in names]
     upper = [limits[k][1] for k in names]
     return q_index, multiplier, offset, names, lower, upper

@@ -541,7 +541,7 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
     if spec not in zoo and spec not in urdf:
         path = pathlib.Path(spec)
         if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or path.exists():
-            return _load_urdf_file(path, dtype, tip, base), path.stem
+            return _movable(_load_urdf_file(path, dtype, tip, base), spec), path.stem
         more = f" or one of {len(urdf)} erd/... URDF robots" if urdf else ""
         raise UsageError(
             f"unknown robot {spec!r}; choose one of {', '.join(zoo)}{more}, or give a URDF file "
@@ -552,7 +552,17 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
         raise UsageError(
             f"--tip and --base apply to URDF robots; {spec!r} is a zoo model (use --frame)"
         )
-    return jk.robots.load(spec, dtype=dtype, **options), spec.replace("/", "_")
+    return _movable(jk.robots.load(spec, dtype=dtype, **options), spec), spec.replace("/", "_")
+
+
+def _movable(robot, spec: str):
+    """``robot``, or a :class:`UsageError` when it has no moving joint (nothing to compute)."""
+    if robot.dof == 0:
+        raise UsageError(
+            f"robot {spec!r} has no moving joint (dof 0): there is nothing to move; "
+            "choose a robot (or --tip/--base) with a revolute or prismatic joint"
+        )
+    return robot
 
 
 def _load_urdf_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None):

@@ -1064,14 +1064,6 @@ def load_urdf(
     ctx = _Context(model.file)
     root, joints = _select(model, tip, base, ctx)
     _refuse_unsupported(ctx, joints)
-    if not any(j.type in MOVING_TYPES for j in joints):
-        what = "chain" if tip is not None else "tree"
-        raise ctx.error(
-            f"the selected {what} (root {root!r}{f', tip {tip!r}' if tip else ''}) has no moving "
-            f"joint: {len(joints)} joint(s), all fixed. jaxkin needs at least one degree of "
-            "freedom.",
-            fix="select a part of the robot with a revolute, continuous or prismatic joint.",
-        )
     selected = {j.name for j in joints}
     specs = [_joint_spec(j) for j in joints]
     # Joints outside the selection that drive selected mimic joints, with their own mimics.
@@ -1121,7 +1113,7 @@ def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
             link = children[link][0].child
         return link
 
-    if not ends:  # no moving joint: refused by load_urdf before this is asked
+    if not ends:  # no moving joint (dof 0): the last frame, as for any robot without a choice
         return ()
     return tuple(end_frame(j.child) for j in ends)
 

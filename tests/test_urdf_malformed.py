@@ -342,14 +342,6 @@ CASES = [
     ),
     ("no_links", '<robot name="empty"></robot>', ["the robot has no <link>"], 1, None, None),
     (
-        "no_moving_joint",
-        '<robot name="one"><link name="a"/></robot>',
-        ["has no moving joint", "at least one degree of freedom"],
-        None,
-        None,
-        None,
-    ),
-    (
         "robot_without_name",
         '<robot><link name="a"/></robot>',
         ["<robot>", "'name' attribute is missing", 'name="my_robot"'],

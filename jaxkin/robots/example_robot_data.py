@@ -20,8 +20,9 @@ are the zoo's DH models): nothing is shadowed. When two files share a stem, each
 ``jk.robots.info("erd/panda").source`` is its path. Some files of the collection are not
 loadable kinematic models, and loading them raises a :class:`jaxkin.ModelError` that says why
 and lists the other files of the same package (``ur3.urdf`` of 6.0 is an empty xacro output,
-use ``"erd/ur3_robot"``; ``quadrotor_base`` and ``iris_simple`` have no moving joint;
-``alex_psyonic_hands`` has mimic joints whose leader does not exist).
+use ``"erd/ur3_robot"``; ``alex_psyonic_hands`` has mimic joints whose leader does not
+exist). ``quadrotor_base`` and ``iris_simple`` have no moving joint: they load with dof 0
+(``fk``/``fk_all`` work, Jacobians have shape (6, 0)).
 
 Default frames
 --------------
@@ -94,7 +95,7 @@ TOOL_FRAMES: dict[str, tuple[str, ...]] = {
     "erd/so101": ("gripper_frame_link",),
     "erd/talos_left_arm": ("wrist_left_ft_tool_link",),
 }
-"""The standard tool frame of the well-known arms: the first of these links that the file has
+"""The standard tool frame of each well-known arm. The first of these links that the file has
 becomes ``tip`` when :func:`load` is given none (see "Default frames" above)."""
 
 
