@@ -6,7 +6,7 @@ parameters of the model so that ``fk(robot, q_k, frame)`` matches ``Ts_measured[
 differentiates through the model: the parameters are leaves of the :class:`~jaxkin.Robot`
 pytree, so ``jax.grad`` of the loss with respect to them is exact.
 
-Loss (weighted least squares, the maximum-likelihood fit for Gaussian sensor noise):
+Loss (weighted least squares, the maximum-likelihood fit for Gaussian sensor noise)::
 
     L = 1/M sum_k ( |p_k - p(q_k)|^2 / sigma_p^2 + |log(R_k R(q_k)^T)|^2 / sigma_o^2 )
 
