@@ -19,7 +19,7 @@ import jaxkin
 
 project = "jaxkin"
 author = "jaxkin contributors"
-copyright = "jaxkin contributors"  # noqa: A001 (Sphinx's name)
+copyright = "jaxkin contributors"
 release = version = jaxkin.__version__
 
 root_doc = "docs/index"
@@ -30,7 +30,7 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
-        "matplotlib.sphinxext.plot_directive",
+    "matplotlib.sphinxext.plot_directive",
     "myst_nb",
 ]
 
@@ -71,26 +71,55 @@ html_theme = "furo"
 html_title = f"jaxkin {version}"
 html_static_path: list[str] = []
 
-def _resolve_reexport(app, env, node, contnode):
-    """Resolve ``jaxkin.X`` (a re-export such as ``jaxkin.geometric_jacobian``) to where X is
-    documented (``jaxkin.jacobians.geometric_jacobian``); other missing targets stay missing."""
-    target = node.get("reftarget", "")
-    if node.get("refdomain") != "py" or not target.startswith("jaxkin."):
+
+def _lookup(target: str, module: str | None):
+    """``(object, documented name)`` for a dotted ``target``, looked up as Python would: from
+    ``jaxkin`` when it starts with ``jaxkin.``, else in the namespace of the module whose
+    docstring refers to it; ``(None, None)`` when no such object exists. The documented name is
+    the home ``module.qualname`` of the innermost class or function on the path plus the rest
+    (``jaxkin.Robot.tip_frame`` -> ``jaxkin.model.Robot.tip_frame``)."""
+    parts = target.split(".")
+    if parts[0] == "jaxkin":
+        obj, parts = jaxkin, parts[1:]
+    elif module:
+        obj = importlib.import_module(module)
+    else:
+        return None, None
+    name = None
+    for i, part in enumerate(parts):
+        obj = getattr(obj, part, None)
+        if obj is None:
+            return None, None
+        home, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+        if isinstance(home, str) and isinstance(qualname, str) and home.startswith("jaxkin"):
+            name = ".".join([home, qualname, *parts[i + 1 :]])
+    return obj, name
+
+
+def _resolve_by_import(app, env, node, contnode):
+    """Resolve what a reader of the source would: a re-export (``jaxkin.geometric_jacobian`` is
+    documented as ``jaxkin.jacobians.geometric_jacobian``) or a name imported into the module
+    (``JaxkinPrecisionWarning`` in ``jaxkin.build``) links to where it is documented. A name that
+    exists but has no entry here (a private helper such as ``_chunking``, a constant outside
+    ``__all__``) is rendered as code, unlinked. A name that does not exist stays a missing
+    reference, which fails the strict build."""
+    if node.get("refdomain") != "py":
         return None
-    module_name, _, name = target.rpartition(".")
+    target = node.get("reftarget", "").lstrip("~.")
     try:
-        obj = getattr(importlib.import_module(module_name), name)
-    except (ImportError, AttributeError):
+        obj, name = _lookup(target, node.get("py:module"))
+    except ImportError:
         return None
-    home = getattr(obj, "__module__", None)
-    qualname = getattr(obj, "__qualname__", name)
-    if not home or f"{home}.{qualname}" == target:
+    if obj is None:
         return None
-    node["reftarget"] = f"{home}.{qualname}"
-    domain = env.get_domain("py")
-    return domain.resolve_xref(
-        env, node["refdoc"], app.builder, node["reftype"], node["reftarget"], node, contnode
-    )
+    if name and name != target:
+        node["reftarget"] = name
+        found = env.get_domain("py").resolve_xref(
+            env, node["refdoc"], app.builder, node["reftype"], name, node, contnode
+        )
+        if found is not None:
+            return found
+    return contnode
 
 
 def _redirect_root(app, exception):
@@ -132,7 +161,6 @@ class CliHelp(SphinxDirective):
 
 def setup(app):
     app.add_directive("jaxkin-cli-help", CliHelp)
-    app.connect("missing-reference", _resolve_reexport)
+    app.connect("missing-reference", _resolve_by_import)
     app.connect("build-finished", _redirect_root)
     return {"parallel_read_safe": True}
-
