@@ -4,14 +4,14 @@ Most functions take a Jacobian ``J`` of shape (m, dof) (typically the (6, dof) g
 of :func:`jaxkin.geometric_jacobian`, rows ``[v; omega]``) and work on one Jacobian; batch with
 ``jax.vmap``. ``rows`` selects the task-space rows analysed:
 
-============== ==========================================================================
-``rows``       rows of a (6, dof) Jacobian
-============== ==========================================================================
-``"all"``      all rows (any m); mixes metres and radians, so its values depend on units
-``"translation"`` rows 0..2 (linear velocity)
-``"rotation"`` rows 3..5 (angular velocity)
-a sequence     those row indices, e.g. ``(0, 1)`` for a planar arm's x and y
-============== ==========================================================================
+=================  =======================================================================
+``rows``           rows of a (6, dof) Jacobian
+=================  =======================================================================
+``"all"``          all rows (any m); mixes metres and radians, so its values depend on units
+``"translation"``  rows 0..2 (linear velocity)
+``"rotation"``     rows 3..5 (angular velocity)
+a sequence         those row indices, e.g. ``(0, 1)`` for a planar arm's x and y
+=================  =======================================================================
 
 Everything is computed from singular values (``jnp.linalg.svd(..., compute_uv=False)``, whose
 derivative ``u_i^T dJ v_i`` is finite everywhere), never from ``sqrt(det(J J^T))``, whose value

@@ -9,7 +9,7 @@ For a representation ``phi`` of ``R``, the angular velocity in world axes is
 * ``"zyz"``: ``R = Rz(phi) Ry(theta) Rz(psi)``; ``B = [e_z, Rz(phi) e_y, Rz(phi) Ry(theta) e_z]``,
   ``det B = -sin(theta)``: singular at theta = 0 and pi.
 * ``"rotvec"``: ``R = exp(skew(w))``; ``B`` is the left Jacobian of SO(3),
-  ``I + (1 - cos t)/t^2 skew(w) + (t - sin t)/t^3 skew(w)^2`` (t = |w|), singular only at
+  ``I + (1 - cos t)/t^2 skew(w) + (t - sin t)/t^3 skew(w)^2`` (t = ``|w|``), singular only at
   t = 2 pi k, k >= 1, which the principal branch (t <= pi) never reaches.
 
 :func:`representation_margin` measures the distance to the singularity (``|cos(pitch)|``,

@@ -111,7 +111,8 @@ def classify_twist(V: Any, tol: float = 1e-9) -> str:
       (rotation about an instantaneous axis, zero screw pitch);
     * ``"general"``: omega != 0 and v . omega != 0 (a screw motion: no point is at rest).
 
-    ``tol`` is absolute on |omega| and |v| and relative on the pitch ``|v . omega| / |omega|^2``.
+    ``tol`` is absolute on ``|omega|`` and ``|v|`` and relative on the pitch
+    ``|v . omega| / |omega|^2``.
     Host-side: returns a Python string, so it raises :class:`~jaxkin.JaxkinError` under
     ``jit``/``vmap``/``grad``, and for a non-finite ``V`` or ``tol`` (the non-finite policy of
     :mod:`jaxkin.analysis`: a string cannot be NaN).
