@@ -7,6 +7,9 @@ faster kernel that also compiles several times faster than one over traced param
 compile per robot value and option set; a changed robot (e.g. a calibrated one) compiles once
 more, and an equal robot loaded again reuses the compiled solver.
 
+:func:`eager` does the same for the building blocks (``fk``, Jacobians, twists, derivatives)
+called outside any transformation (see its docstring).
+
 A robot with traced leaves (the entry point called inside the user's ``jit``/``vmap``/``grad``
 over the robot) is passed through unchanged: the implementation is traced into the caller's
 computation, and new parameter values never retrace.
@@ -20,6 +23,7 @@ without them at the same speed. Entry points therefore compile with
 
 from __future__ import annotations
 
+import collections
 import functools
 from collections.abc import Callable
 from typing import Any
@@ -67,3 +71,66 @@ def robot_jit(impl: Callable, static_argnames: tuple[str, ...] = ()) -> Callable
 
     call.get_jitted = jitted_fn  # type: ignore[attr-defined]
     return call
+
+
+# ----------------------------------------------------------------------------- eager calls
+EAGER_CACHE_SIZE = 128
+"""How many compiled building blocks ``(kernel, robot value, static options)`` are kept; the least
+recently used is dropped first, so the cache neither keeps robots alive for ever nor grows
+without bound."""
+
+EAGER_COMPILE_CALL = 1
+"""The call of a ``(kernel, robot, static options)`` key that compiles (1: the first)."""
+
+_eager_cache: collections.OrderedDict = collections.OrderedDict()
+
+
+def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
+    """``kernel(robot, *static, *arrays)``, compiled and cached when called outside any trace.
+
+    Inside a user's ``jit``/``vmap``/``grad`` (a traced robot or array, or an active trace) the
+    kernel is traced inline, as part of the caller's computation. Called eagerly, the kernel is
+    compiled by ``jax.jit`` with the robot closed over (its constants folded: see
+    :func:`jaxkin.kinematics.scalar_pass`) and cached under ``(kernel, robot, static)``; the
+    robot is an immutable value, so an equal robot shares the executable and a changed one
+    (``robot.replace(...)``) gets its own. ``jax.jit`` compiles once per array shape and dtype.
+    At most :data:`EAGER_CACHE_SIZE` keys are kept.
+    """
+    if inside_trace() or not robot.is_concrete or is_traced(arrays):
+        return kernel(robot, *static, *arrays)
+    key = (kernel, robot, static)
+    try:
+        entry = _eager_cache.pop(key, 0)
+    except TypeError:  # an unhashable static option: no cache
+        return kernel(robot, *static, *arrays)
+    if isinstance(entry, int):
+        if entry + 1 < EAGER_COMPILE_CALL:
+            _eager_cache[key] = entry + 1
+            _evict()
+            return kernel(robot, *static, *arrays)
+        options = compiler_options() or None
+        entry = jax.jit(functools.partial(kernel, robot, *static), compiler_options=options)
+    _eager_cache[key] = entry
+    _evict()
+    return entry(*arrays)
+
+
+def _evict() -> None:
+    while len(_eager_cache) > EAGER_CACHE_SIZE:
+        _eager_cache.popitem(last=False)
+
+
+def eager_cache_clear() -> None:
+    """Drop every compiled building block (tests; memory)."""
+    _eager_cache.clear()
+
+
+def eager_cache_info() -> dict:
+    """``{"entries": keys held, "compiled": keys with an executable, "executables": compiled
+    (shape, dtype) variants in all}``; for tests and the curious."""
+    compiled = [v for v in _eager_cache.values() if not isinstance(v, int)]
+    return {
+        "entries": len(_eager_cache),
+        "compiled": len(compiled),
+        "executables": sum(v._cache_size() for v in compiled),
+    }

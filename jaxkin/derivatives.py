@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_point, check_q, check_reference, result_dtype
+from ._jit import eager
 from .jacobians import analytical_jacobian_pass, jacobian_pass
 from .model import Robot
 from .representations import check_representation, guard_singular
@@ -95,7 +96,7 @@ def jacobian_dot(
     True
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot")
-    return _jacobian_dot(robot, f, reference, q, qd, pt)
+    return eager(_jacobian_dot, robot, (f, reference), q, qd, pt)
 
 
 def _jacobian_dot(robot, f, reference, q, qd, pt):
@@ -127,7 +128,7 @@ def jacobian_dot_qd(
     [-1.0, -1.0]
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot_qd")
-    return _jacobian_dot_qd(robot, f, reference, q, qd, pt)
+    return eager(_jacobian_dot_qd, robot, (f, reference), q, qd, pt)
 
 
 def _jacobian_dot_qd(robot, f, reference, q, qd, pt):
@@ -169,7 +170,7 @@ def kinematic_hessian(
     fn = "jk.kinematic_hessian"
     hint = f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
     q, _, f, pt = _check_call(robot, q, q, frame, point, reference, fn, hint)
-    return _hessian(robot, f, reference, q, pt)
+    return eager(_hessian, robot, (f, reference), q, pt)
 
 
 def _hessian(robot, f, reference, q, pt):
@@ -229,7 +230,7 @@ def analytical_jacobian_dot(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
-    Jad, margin = _analytical_dot(robot, f, representation, q, qd, pt)
+    Jad, margin = eager(_analytical_dot, robot, (f, representation), q, qd, pt)
     return _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 
@@ -249,7 +250,7 @@ def analytical_jacobian_dot_qd(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot_qd"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
-    acc, margin = _analytical_dot_qd(robot, f, representation, q, qd, pt)
+    acc, margin = eager(_analytical_dot_qd, robot, (f, representation), q, qd, pt)
     return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 

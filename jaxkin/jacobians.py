@@ -36,6 +36,7 @@ from ._checks import (
     is_traced,
     result_dtype,
 )
+from ._jit import eager
 from .errors import JaxkinError, ShapeError
 from .kinematics import frame_pose, scalar_pass, scan_pass, uses_scan
 from .model import Robot
@@ -131,7 +132,7 @@ def geometric_jacobian(
     ([-1.0, -1.0], [1.0, 1.0])
     """
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.geometric_jacobian")
-    return _matrix(robot, f, reference, q, pt)
+    return eager(_matrix, robot, (f, reference), q, pt)
 
 
 def _matrix(robot: Robot, f: int, reference: str, q: jax.Array, pt) -> jax.Array:
@@ -163,7 +164,7 @@ def frame_jacobian(
     ((6, 6), (4, 4))
     """
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.jacobians.frame_jacobian")
-    return _matrix_and_pose(robot, f, reference, q, pt)
+    return eager(_matrix_and_pose, robot, (f, reference), q, pt)
 
 
 def _check_frame_call(robot, q, frame, point, reference, fn):
@@ -320,7 +321,7 @@ def _jacobian_from_derivs(p, R, dp, dR, reference):
 
 def _autodiff_jacobian(robot, q, frame, point, reference, mode, fn):
     q, f, pt = _check_frame_call(robot, q, frame, point, reference, fn)
-    return _autodiff_kernel(robot, f, reference, mode, q, pt)
+    return eager(_autodiff_kernel, robot, (f, reference, mode), q, pt)
 
 
 def _autodiff_kernel(robot, f, reference, mode, q, pt):
@@ -407,7 +408,7 @@ def analytical_jacobian(
     if method not in ("chain", "jacfwd"):
         raise JaxkinError(f"method must be 'chain' or 'jacfwd', got {method!r}.")
     q, f, pt = _check_frame_call(robot, q, frame, point, "world_aligned", "jk.analytical_jacobian")
-    Ja, margin = analytical_jacobian_pass(robot, q, f, pt, representation, method)
+    Ja, margin = eager(_analytical_kernel, robot, (f, representation, method), q, pt)
     if return_margin:
         return Ja, margin
     return guard_singular(
@@ -420,6 +421,10 @@ def analytical_jacobian(
         robot,
         q,
     )
+
+
+def _analytical_kernel(robot, f, representation, method, q, pt):
+    return analytical_jacobian_pass(robot, q, f, pt, representation, method)
 
 
 def analytical_jacobian_pass(

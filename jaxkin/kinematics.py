@@ -16,6 +16,7 @@ import numpy as np
 from . import _fold as fold
 from . import spatial
 from ._checks import check_q, is_traced, result_dtype
+from ._jit import eager
 from .model import Robot
 from .placements import joint_placements
 
@@ -279,7 +280,7 @@ def fk_all(robot: Robot, q: Any) -> jax.Array:
     >>> bool(jnp.allclose(Ts[-1], jk.fk(robot, q)))  # the last frame is the tip
     True
     """
-    return _fk_all(robot, check_q(robot, q, fn="jk.fk_all"))
+    return eager(_fk_all, robot, (), check_q(robot, q, fn="jk.fk_all"))
 
 
 def _fk_all(robot: Robot, q: jax.Array) -> jax.Array:
@@ -302,7 +303,7 @@ def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
     [1.0, 1.0]
     """
     q = check_q(robot, q, fn="jk.fk")
-    return frame_transform(robot, robot.frame_index(frame), q)
+    return eager(frame_transform, robot, (robot.frame_index(frame),), q)
 
 
 def frame_transform(robot: Robot, f: int, q: jax.Array) -> jax.Array:

@@ -168,6 +168,11 @@ class Robot:
             object.__setattr__(self, "_key", key)
         return key
 
+    @property
+    def is_concrete(self) -> bool:
+        """True when no leaf is traced; cached, since a concrete robot stays concrete."""
+        return self._value_key() is not None
+
     def __eq__(self, other: object) -> bool:
         if self is other:
             return True

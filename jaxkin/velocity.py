@@ -20,6 +20,7 @@ from ._checks import (
     is_traced,
     result_dtype,
 )
+from ._jit import eager
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
 from .model import Robot
@@ -64,7 +65,7 @@ def twist(
     qd = check_q(robot, qd, what="qd", fn="jk.twist", batch_hint=hint)
     check_reference(reference)
     pt = check_point(point, result_dtype(robot, q), "jk.twist")
-    return _twist(robot, robot.frame_index(frame), reference, q, qd, pt)
+    return eager(_twist, robot, (robot.frame_index(frame), reference), q, qd, pt)
 
 
 def _twist(robot: Robot, f: int, reference: str, q, qd, pt) -> jax.Array:

@@ -1,0 +1,136 @@
+"""Eager calls of the building blocks run a cached compiled executable: equal to the traced path,
+never stale for a changed robot, one compile per (robot, shape, dtype), and a bounded cache.
+
+No wall-clock asserts: compile counts (the cache's entries and ``jax.jit``'s own cache size) and
+equalities.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import jaxkin as jk
+import jaxkin.testing as jkt
+from jaxkin import _jit
+
+CALLS = {
+    "fk": lambda r, q, qd: jk.fk(r, q),
+    "fk_all": lambda r, q, qd: jk.fk_all(r, q),
+    "geometric_jacobian": lambda r, q, qd: jk.geometric_jacobian(r, q, reference="local"),
+    "frame_jacobian": lambda r, q, qd: jk.jacobians.frame_jacobian(r, q, point=[0, 0, 0.1]),
+    "jacobian_fwd": lambda r, q, qd: jk.jacobian_fwd(r, q),
+    "jacobian_rev": lambda r, q, qd: jk.jacobian_rev(r, q, reference="world"),
+    "analytical_jacobian": lambda r, q, qd: jk.analytical_jacobian(r, q, "zyz"),
+    "twist": lambda r, q, qd: jk.twist(r, q, qd),
+    "jacobian_dot": lambda r, q, qd: jk.jacobian_dot(r, q, qd),
+    "jacobian_dot_qd": lambda r, q, qd: jk.jacobian_dot_qd(r, q, qd),
+    "analytical_jacobian_dot": lambda r, q, qd: jk.analytical_jacobian_dot(r, q, qd),
+    "analytical_jacobian_dot_qd": lambda r, q, qd: jk.analytical_jacobian_dot_qd(r, q, qd, "zyz"),
+    "kinematic_hessian": lambda r, q, qd: jk.kinematic_hessian(r, q),
+}
+
+
+@pytest.fixture
+def puma():
+    _jit.eager_cache_clear()
+    robot = jk.robots.load("puma560", dtype=np.float64)
+    q = jnp.asarray([0.1, -0.4, 0.3, 0.2, 0.5, -0.3])
+    yield robot, q, jnp.linspace(-1.0, 1.0, 6)
+    _jit.eager_cache_clear()
+
+
+def _leaves(x):
+    return [np.asarray(a) for a in jax.tree_util.tree_leaves(x)]
+
+
+@pytest.mark.parametrize("name", sorted(CALLS))
+def test_eager_equals_traced_and_compiles_once(puma, name):
+    robot, q, qd = puma
+    call = CALLS[name]
+    first = call(robot, q, qd)
+    assert _jit.eager_cache_info() == {"entries": 1, "compiled": 1, "executables": 1}
+    for k in range(3):  # new values, same shapes: no new compile
+        again = call(robot, q + 0.1 * (k + 1), qd)
+    assert _jit.eager_cache_info()["executables"] == 1
+    # inline in the user's jit, vmap and grad: the same numbers, and the cache is not touched
+    traced = jax.jit(lambda q, qd: call(robot, q, qd))(q, qd)
+    mapped = jax.vmap(lambda q, qd: call(robot, q, qd))(q[None], qd[None])
+    for a, b, c in zip(_leaves(first), _leaves(traced), _leaves(mapped), strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-15 * max(1.0, np.abs(b).max()))
+        np.testing.assert_allclose(a, c[0], rtol=0, atol=1e-15 * max(1.0, np.abs(c).max()))
+    assert not np.allclose(_leaves(again)[0], _leaves(first)[0])
+    assert _jit.eager_cache_info()["entries"] == 1
+
+
+def test_a_new_dtype_or_shape_compiles_once_more(puma):
+    robot, q, _qd = puma
+    for _ in range(3):
+        jk.geometric_jacobian(robot, q)
+    J32 = jk.geometric_jacobian(robot.astype(np.float32), q.astype(jnp.float32))
+    assert J32.dtype == jnp.float32  # a float32 robot is another key
+    assert _jit.eager_cache_info() == {"entries": 2, "compiled": 2, "executables": 2}
+    J = jk.geometric_jacobian(robot, q.astype(jnp.float32))  # float64 robot, float32 q
+    assert J.dtype == jnp.float64
+    assert _jit.eager_cache_info() == {"entries": 2, "compiled": 2, "executables": 3}
+    jk.geometric_jacobian(robot, q.astype(jnp.float32))
+    assert _jit.eager_cache_info()["executables"] == 3
+
+
+def test_a_replaced_robot_gets_its_own_answer(puma):
+    robot, q, _qd = puma
+    T = jk.fk(robot, q)
+    params = dict(robot.params)
+    params["d"] = np.asarray(params["d"]) + 0.1
+    moved = robot.replace(params=params)
+    T_moved = jk.fk(moved, q)
+    assert not np.allclose(np.asarray(T), np.asarray(T_moved))
+    expected = jax.jit(lambda r, q: jk.fk(r, q))(moved, q)  # the robot traced: nothing folded
+    np.testing.assert_allclose(np.asarray(T_moved), np.asarray(expected), rtol=0, atol=1e-15)
+    assert _jit.eager_cache_info()["compiled"] == 2
+    again = jk.robots.load("puma560", dtype=np.float64)  # an equal robot shares the executable
+    np.testing.assert_array_equal(np.asarray(jk.fk(again, q)), np.asarray(T))
+    assert _jit.eager_cache_info()["compiled"] == 2
+
+
+def test_grad_of_the_robot_and_of_q_trace_inline(puma):
+    robot, q, qd = puma
+    jk.twist(robot, q, qd)
+    before = _jit.eager_cache_info()
+    g = jax.grad(lambda q: jk.twist(robot, q, qd)[0])(q)
+    gr = jax.grad(lambda r: jk.fk(r, q)[0, 3])(robot)  # gradient with respect to the robot
+    assert _jit.eager_cache_info() == before
+    eps = 1e-6
+    for k in range(6):
+        dq = jnp.zeros(6).at[k].set(eps)
+        fd = (jk.twist(robot, q + dq, qd)[0] - jk.twist(robot, q - dq, qd)[0]) / (2 * eps)
+        assert abs(float(g[k]) - float(fd)) < 1e-7
+    assert np.isfinite(np.asarray(gr.params["d"])).all()
+
+
+def test_the_cache_is_bounded(monkeypatch):
+    monkeypatch.setattr(_jit, "EAGER_CACHE_SIZE", 4)
+    _jit.eager_cache_clear()
+    base = jk.robots.load("two_link_planar", dtype=np.float64)
+    q = jnp.asarray([0.3, -0.2])
+    for k in range(10):
+        robot = base.replace(params={**base.params, "a": np.asarray(base.params["a"]) + k})
+        T = jk.fk(robot, q)
+        assert _jit.eager_cache_info()["entries"] <= 4
+        # still the right answer: planar two-link closed form
+        a1, a2 = (np.asarray(robot.params["a"])[i] for i in range(2))
+        x = a1 * np.cos(0.3) + a2 * np.cos(0.1)
+        assert abs(float(T[0, 3]) - x) < 1e-12
+    _jit.eager_cache_clear()
+
+
+@settings(max_examples=10)
+@given(jkt.robots_and_configurations(max_joints=4))
+def test_the_cache_bound_holds_over_random_robots(robot_and_q):
+    robot, q = robot_and_q
+    jk.geometric_jacobian(robot, q)
+    jk.fk(robot, q)
+    assert _jit.eager_cache_info()["entries"] <= _jit.EAGER_CACHE_SIZE
