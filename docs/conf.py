@@ -154,7 +154,7 @@ class CliHelp(SphinxDirective):
         for title, text in helps:
             section = nodes.section(ids=[nodes.make_id(title)])
             section += nodes.title(text=title)
-            section += nodes.literal_block(text, text)
+            section += nodes.literal_block(text, text, language="text")
             out.append(section)
         return out
 
