@@ -37,6 +37,7 @@ same message). ``throw=False`` returns the codes for you to inspect.
 from __future__ import annotations
 
 import enum
+import functools
 import warnings
 from typing import Any, NamedTuple
 
@@ -48,6 +49,7 @@ from . import sampling, spatial
 from ._checks import check_poses, check_q, check_robot, is_traced, safe_norm
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
+from .ik_gradients import full_rank, solution_tangent
 from .jacobians import jacobian_pass
 from .kinematics import forward_pass
 from .model import Robot
@@ -100,7 +102,12 @@ class IKSolution(NamedTuple):
     ``q`` (dof,): the best configuration found (within the joint limits); ``converged`` bool;
     ``residual``: ``|e(q)|`` (see the module doc); ``steps`` int32: solver iterations over all
     starts; ``result`` int32: a :class:`RESULTS` code; ``position_error`` (m) and
-    ``orientation_error`` (rad) of ``q``; ``seed`` int32: index of the start that produced ``q``.
+    ``orientation_error`` (rad) of ``q``; ``seed`` int32: index of the start that produced ``q``;
+    ``singular`` bool: the Jacobian at ``q`` (joints held at a limit left out) is rank-deficient
+    to working precision, where derivatives of ``q`` are damped (:mod:`jaxkin.ik_gradients`).
+
+    ``q`` is differentiable (``jax.grad``/``jvp`` with respect to the target and the robot's
+    parameters, by the implicit function theorem: :mod:`jaxkin.ik_gradients`).
     """
 
     q: jax.Array
@@ -111,6 +118,7 @@ class IKSolution(NamedTuple):
     position_error: jax.Array
     orientation_error: jax.Array
     seed: jax.Array
+    singular: jax.Array
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -458,7 +466,8 @@ def _optax_one(robot, T_target, seeds, f, tol, max_steps, optimizer, patience, u
 # ----------------------------------------------------------------------------- entry point
 def _finish(robot, T_target, q, steps, seed, hit_max, unreachable, f, tol) -> IKSolution:
     """Errors, flags and result code of the final ``q`` of one target."""
-    ep, eo = pose_error_norms(_pose(robot, q, f), T_target)
+    g = _pose_and_jacobian(robot, q, f)
+    ep, eo = pose_error_norms(g[0], T_target)
     residual = safe_norm(jnp.stack([ep, eo]))
     converged = residual <= tol
     code = jnp.where(
@@ -474,6 +483,7 @@ def _finish(robot, T_target, q, steps, seed, hit_max, unreachable, f, tol) -> IK
             ),
         ),
     ).astype(jnp.int32)
+    held = _held(q, _limits(robot, q.dtype))
     return IKSolution(
         q=q,
         converged=converged,
@@ -483,6 +493,7 @@ def _finish(robot, T_target, q, steps, seed, hit_max, unreachable, f, tol) -> IK
         position_error=ep,
         orientation_error=eo,
         seed=seed.astype(jnp.int32),
+        singular=~full_rank(jax.lax.stop_gradient(g[1]), held),
     )
 
 
@@ -525,6 +536,27 @@ def _solve_batch_impl(
     num_seeds,
 ):
     T_all = T_all.reshape(-1, 4, 4)
+    static = (f, method, optimizer, lanes, num_seeds)
+    args = (T_all, q0, pool, tol, lam0, max_steps, patience)
+    # A concrete robot stays out of the differentiated arguments (static: constants folded); a
+    # traced one is an argument, so that derivatives reach its leaves.
+    if is_traced(robot):
+        q, steps, seed, hit_max, unreachable = _solve_core(None, static, robot, *args)
+    else:
+        q, steps, seed, hit_max, unreachable = _solve_core(robot, static, None, *args)
+    return jax.vmap(lambda T, qq, k, sd, h, u: _finish(robot, T, qq, k, sd, h, u, f, tol))(
+        T_all, q, steps, seed, hit_max, unreachable
+    )
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _solve_core(
+    robot_static, static, robot_traced, T_all, q0, pool, tol, lam0, max_steps, patience
+):
+    """The solver loops: ``(q, steps, seed, hit_max, unreachable)`` per target. Differentiated
+    by :func:`_solve_core_jvp` (the implicit function theorem), never through the loops."""
+    robot = robot_static if robot_traced is None else robot_traced
+    f, method, optimizer, lanes, num_seeds = static
     dtype = T_all.dtype
     N = T_all.shape[0]
     start = _start_fn(robot, q0, pool, N, num_seeds, dtype)
@@ -542,9 +574,32 @@ def _solve_batch_impl(
         q, steps, seed, hit_max = jax.vmap(
             lambda T, sd, u: _optax_one(robot, T, sd, f, tol, max_steps, optimizer, patience, u)
         )(T_all, seeds, unreachable)
-    return jax.vmap(lambda T, qq, k, sd, h, u: _finish(robot, T, qq, k, sd, h, u, f, tol))(
-        T_all, q, steps, seed, hit_max, unreachable
-    )
+    return q, steps, seed, hit_max, unreachable
+
+
+@_solve_core.defjvp
+def _solve_core_jvp(robot_static, static, primals, tangents):
+    """``dq`` of every target by :func:`jaxkin.ik_gradients.solution_tangent` (see that
+    module's doc); the counters and flags have no tangent."""
+    out = _solve_core(robot_static, static, *primals)
+    robot_traced, T_all = primals[0], primals[1]
+    robot_dot, T_dot = tangents[0], tangents[1]
+    robot = robot_static if robot_traced is None else robot_traced
+    f = static[0]
+    q = out[0]
+    held = jax.vmap(lambda qq: _held(qq, _limits(robot, q.dtype)))(q)
+    dq = jax.vmap(
+        lambda qq, T, h, Td: solution_tangent(
+            robot, qq, T, f, h, Td, None if robot_traced is None else robot_dot
+        )
+    )(q, T_all, held, T_dot.astype(T_all.dtype))
+    zeros = tuple(np.zeros(np.shape(x), jax.dtypes.float0) for x in out[1:])
+    return out, (dq.astype(q.dtype), *zeros)
+
+
+def _held(q: jax.Array, lim: _Limits) -> jax.Array:
+    """Joints held at a limit (the derivative keeps them there): clipped joints exactly at one."""
+    return ~lim.wraps & ((q <= lim.lo) | (q >= lim.hi))
 
 
 _solve_batch = robot_jit(_solve_batch_impl, ("f", "method", "optimizer", "lanes", "num_seeds"))
@@ -622,7 +677,7 @@ def solve_ik(
     S = _num_starts(seeds, num_seeds, method)
     if tol is None:
         tol = 1e-10 if dtype == np.float64 else 1e-5
-    if not tol > 0:
+    if not is_traced(tol) and not tol > 0:  # a traced tol <= 0 converges nowhere (flagged)
         raise JaxkinError(f"{fn}: tol must be > 0, got {tol!r}.")
     if method == "optax" and optimizer is None:
         optimizer = default_optimizer()

@@ -1,0 +1,148 @@
+"""Derivatives of inverse-kinematics solutions by the implicit function theorem.
+
+:func:`jaxkin.solve_ik` is differentiable: ``jax.jvp``, ``jax.jacfwd`` and ``jax.grad`` of
+``sol.q`` with respect to ``T_target`` and to the robot's parameters (its float leaves, e.g. a
+tool offset; the robot must then be traced, as inside ``jax.grad(loss)(robot)``) apply the rule
+below at the returned solution; the solver's iterations are never differentiated. The start
+``q0`` and the seeds have derivative zero.
+
+The solver drives the residual ``e(q, T, theta) = [p_T - p(q); log(R_T R(q)^T)]`` (world axes;
+:func:`jaxkin.pose_errors.pose_residual`) to zero, and ``de/dq = -J`` at ``e = 0`` (``J``: the
+geometric Jacobian of the frame, world-aligned, rows ``[v; omega]``). Differentiating
+``e(q*(T, theta), T, theta) = 0`` gives ``J dq = b`` with ``b = (de/dT) dT + (de/dtheta) dtheta``,
+and the derivative returned is
+
+    dq = J_f^T (J_f J_f^T + mu^2 I)^-1 b = sum_i s_i / (s_i^2 + mu^2) v_i u_i^T b     (dof,)
+
+where ``J_f`` is ``J`` with the columns of the *held* joints zeroed (joints the solver left
+exactly at a limit: their ``dq`` is 0), ``s_i, u_i, v_i`` its singular values and vectors, and
+``mu = eps^(3/4) s_max`` (``eps`` of the dtype). For a regular solution this is the pseudo-inverse
+``dq = J_f^+ b`` up to a relative ``(mu / s_min)^2``, below rounding while ``s_min / s_max >
+sqrt(eps)``:
+
+* non-redundant arm (6 free joints): the unique derivative ``J^-1 b``;
+* redundant arm (more free joints than 6, e.g. the Panda): the solutions form a manifold and
+  ``dq`` is its minimum-norm tangent, i.e. the derivative of the solution *nearest to* ``q*``
+  on the perturbed target's manifold (what re-solving warm-started at ``q*`` returns);
+* fewer than 6 free joints (a limit active on a 6-dof arm): the least-squares ``dq``.
+
+Singular or unconverged solutions give finite damped values, never NaN. Check the flags of the
+:class:`jaxkin.IKSolution`: ``converged`` (without it there is no implicit function and the
+derivative is only that of a best effort) and ``singular`` (``s_min^2 <= eps |J_f|_F^2`` among
+the free columns: the true derivative is unbounded there and the damped one is a choice).
+
+Calibration through IK (fit a tool offset so that IK solutions match measured joint angles)::
+
+    import optax
+    def loss(robot, Ts, q_measured, q0):
+        sol = jax.vmap(lambda T, q: jk.solve_ik(robot, T, q0, seeds=q[None], throw=False))(
+            Ts, q_measured)
+        return jnp.sum((sol.q - q_measured) ** 2)
+    grad = jax.jit(jax.grad(loss))          # the robot is traced: its leaves get gradients
+    opt = optax.adam(1e-3); state = opt.init(robot)
+    for _ in range(100):
+        g = grad(robot, Ts, q_measured, q0)
+        updates, state = opt.update(g, state)
+        robot = optax.apply_updates(robot, updates)   # all leaves move; mask to fit one
+
+``tests/test_ik_implicit.py`` runs this loop on the tool offset alone and recovers the true one.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .jacobians import jacobian_pass
+from .pose_errors import pose_residual
+
+__all__ = ["full_rank", "solution_tangent"]
+
+
+def _pivots_positive(A: jax.Array) -> jax.Array:
+    """True when the symmetric (m, m) ``A`` is positive definite (every Cholesky pivot > 0),
+    unrolled into scalar operations (cheap under ``vmap``)."""
+    m = A.shape[0]
+    L: list[list[Any]] = [[None] * m for _ in range(m)]
+    ok = jnp.ones((), bool)
+    for i in range(m):
+        for k in range(i + 1):
+            s = A[i, k] - sum((L[i][j] * L[k][j] for j in range(k)), start=jnp.zeros_like(A[0, 0]))
+            if i == k:
+                ok = ok & (s > 0)
+                L[i][k] = jnp.sqrt(jnp.maximum(s, jnp.finfo(A.dtype).tiny))
+            else:
+                L[i][k] = s / L[k][k]
+    return ok
+
+
+def full_rank(J: jax.Array, held: jax.Array) -> jax.Array:
+    """True when ``J`` (6, dof) restricted to the free columns (``~held``) has full rank to
+    working precision: ``s_min^2 > eps |J_f|_F^2`` over its ``min(6, n_free)`` singular values.
+
+    Decided exactly by a Cholesky factorisation of the Gram matrix shifted by that threshold
+    (positive definite iff every eigenvalue exceeds it), not an SVD.
+
+    >>> import jax.numpy as jnp
+    >>> J = jnp.eye(6, 7)
+    >>> bool(full_rank(J, jnp.zeros(7, bool))), bool(full_rank(J, jnp.arange(7) == 0))
+    (True, False)
+    """
+    dtype = J.dtype
+    Jf = jnp.where(held[None, :], 0.0, J)
+    fro2 = jnp.sum(Jf * Jf)
+    tau = jnp.finfo(dtype).eps * fro2
+    n = J.shape[1]
+    wide = jnp.sum(~held) >= J.shape[0]  # the 6 x 6 Gram J_f J_f^T decides
+    G = Jf @ Jf.T - tau * jnp.eye(J.shape[0], dtype=dtype)
+    # Otherwise the Gram of the free columns; held ones get a diagonal that cannot fail.
+    H = Jf.T @ Jf + jnp.diag(jnp.where(held, 2 * fro2 + 1, -tau)).astype(dtype)
+    ok = jnp.where(wide, _pivots_positive(G), _pivots_positive(H)) if n >= 1 else False
+    return ok & (fro2 > 0) & jnp.all(jnp.isfinite(J))
+
+
+def damped_pinv_apply(J: jax.Array, held: jax.Array, b: jax.Array) -> jax.Array:
+    """``J_f^T (J_f J_f^T + mu^2 I)^-1 b`` (dof,) through the SVD of ``J_f`` (see the module
+    doc); held joints get exactly 0. ``J`` must be finite."""
+    dtype = J.dtype
+    Jf = jnp.where(held[None, :], 0.0, J)
+    U, s, Vt = jnp.linalg.svd(Jf, full_matrices=False)
+    mu = jnp.finfo(dtype).eps ** 0.75 * jnp.max(s)
+    denom = s * s + mu * mu
+    w = jnp.where(denom > 0, s / jnp.where(denom > 0, denom, 1.0), 0.0)
+    dq = Vt.T @ (w * (U.T @ b))
+    return jnp.where(held, 0.0, dq)
+
+
+def solution_tangent(
+    robot: Any,
+    q: jax.Array,
+    T_target: jax.Array,
+    f: int,
+    held: jax.Array,
+    T_dot: jax.Array,
+    robot_dot: Any = None,
+) -> jax.Array:
+    """The derivative ``dq`` (dof,) of an IK solution ``q`` of ``T_target`` (4, 4) for the
+    tangents ``T_dot`` (4, 4) and ``robot_dot`` (a robot of tangents, or None for none), by the
+    rule of the module doc; ``held`` (dof,) bool marks the joints held at a limit."""
+
+    def e_of_T(T):
+        return pose_residual(pose, T)
+
+    g = jacobian_pass(robot, q, f, None, "world_aligned")
+    pose = g.pose()
+    J = g.matrix()
+    _, b = jax.jvp(e_of_T, (T_target,), (T_dot,))
+    if robot_dot is not None:
+
+        def e_of_robot(rb):
+            return pose_residual(jacobian_pass(rb, q, f, None, "world_aligned").pose(), T_target)
+
+        _, b_robot = jax.jvp(e_of_robot, (robot,), (robot_dot,))
+        b = b + b_robot
+    finite = jnp.all(jnp.isfinite(J))
+    dq = damped_pinv_apply(jnp.where(finite, J, 0.0), held, jnp.where(finite, b, 0.0))
+    return dq
