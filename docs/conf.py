@@ -122,6 +122,12 @@ def _resolve_by_import(app, env, node, contnode):
     return contnode
 
 
+def _drop_field_aliases(app, what, name, obj, options, lines):
+    """NamedTuple fields: drop Python's "Alias for field number N" (says nothing to a reader)."""
+    if len(lines) == 1 and lines[0].startswith("Alias for field number"):
+        lines.clear()
+
+
 def _redirect_root(app, exception):
     """The root page lives at docs/index.html: write index.html pointing there."""
     if exception is None and app.builder.format == "html":
@@ -162,5 +168,6 @@ class CliHelp(SphinxDirective):
 def setup(app):
     app.add_directive("jaxkin-cli-help", CliHelp)
     app.connect("missing-reference", _resolve_by_import)
+    app.connect("autodoc-process-docstring", _drop_field_aliases)
     app.connect("build-finished", _redirect_root)
     return {"parallel_read_safe": True}

@@ -109,3 +109,24 @@ def test_page_examples_run(page):
     with jax.numpy_rank_promotion("allow"):
         for block in _python_blocks(page):
             exec(compile(block, str(page), "exec"), {})
+
+
+# Documented elsewhere: the command line by its parser's help (docs/cli.md); __main__ runs it.
+NOT_ON_API_PAGES = {"jaxkin.__main__", "jaxkin.cli"}
+
+
+def test_every_public_module_has_an_api_page():
+    import pkgutil
+
+    import jaxkin
+
+    modules = {
+        m.name
+        for m in pkgutil.walk_packages(jaxkin.__path__, prefix="jaxkin.")
+        if not m.name.rpartition(".")[2].startswith("_")
+    }
+    pages = "".join(p.read_text(encoding="utf-8") for p in DOCS.glob("api/*.md"))
+    documented = set(re.findall(r"^\.\. automodule:: (\S+)$", pages, re.M))
+    missing = sorted(modules - documented - NOT_ON_API_PAGES)
+    assert not missing, f"add these to a page in docs/api/: {missing}"
+    assert documented <= modules, sorted(documented - modules)
