@@ -1,0 +1,117 @@
+"""Build the notebooks: each jupytext percent source ``NN_name.py`` becomes ``NN_name.ipynb``.
+
+Edit the ``.py`` sources, never the ``.ipynb`` files, then run from the repository root::
+
+    python notebooks/build.py            # every notebook
+    python notebooks/build.py 04_niryo   # the sources whose name starts with 04_niryo
+
+Each notebook is converted with jupytext, given the install cell below as its first code cell,
+executed with nbclient in ``notebooks/`` (so ``data/...`` paths resolve) and written with its
+outputs. ``python notebooks/build.py --check`` executes nothing: it exits 1 when a committed
+notebook's cells differ from its source's (tests/test_notebooks.py checks the same and more).
+Needs the ``notebooks`` extra (``pip install -e ".[notebooks]"``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import pathlib
+import sys
+
+import jupytext
+import nbclient
+import nbformat
+
+HERE = pathlib.Path(__file__).resolve().parent
+
+# Where a notebook installs jaxkin from when it is missing, relative to the notebook: the jaxkin
+# checkout that holds it. The only place the package source is named; every notebook gets it.
+PACKAGE_SOURCE = ".."
+
+INSTALL_CELL = f"""\
+# Runs unchanged where jaxkin is installed; elsewhere installs it from this notebook's checkout.
+import importlib.util
+
+if importlib.util.find_spec("jaxkin") is None:
+    import pathlib
+    import subprocess
+    import sys
+
+    source = pathlib.Path("{PACKAGE_SOURCE}").resolve()
+    print(
+        f"installing jaxkin[notebooks] from {{source}}; if that fails, run "
+        '`pip install "jaxkin[notebooks] @ file:///path/to/jaxkin"` (a checkout or the wheel '
+        "from `pip wheel --no-deps .`) and restart the kernel"
+    )
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", f"jaxkin[notebooks] @ {{source.as_uri()}}"],
+        check=True,
+    )"""
+
+KERNELSPEC = {"display_name": "Python 3", "language": "python", "name": "python3"}
+CELL_TIMEOUT_S = 300
+
+
+def sources() -> list[pathlib.Path]:
+    """The notebook sources, ``notebooks/NN_*.py``, sorted."""
+    return sorted(HERE.glob("[0-9][0-9]_*.py"))
+
+
+def from_source(path: pathlib.Path) -> nbformat.NotebookNode:
+    """The notebook of one percent source, not executed: install cell first, stable cell ids."""
+    nb = jupytext.read(path, fmt="py:percent")
+    first_code = next(i for i, c in enumerate(nb.cells) if c.cell_type == "code")
+    nb.cells.insert(first_code, nbformat.v4.new_code_cell(INSTALL_CELL))
+    for i, cell in enumerate(nb.cells):
+        cell.id = f"c{i:02d}"  # stable ids keep diffs small
+        cell.metadata = {}
+    nb.metadata = {"kernelspec": KERNELSPEC, "language_info": {"name": "python"}}
+    return nb
+
+
+def cells(nb: nbformat.NotebookNode) -> list[tuple[str, str]]:
+    """(type, source) of every cell: what must agree between a source and its notebook."""
+    return [(c.cell_type, c.source.strip()) for c in nb.cells]
+
+
+def execute(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
+    """A copy of ``nb`` executed in ``notebooks/`` with ``notebooks/matplotlibrc`` (72 dpi figures);
+    raises on the first failing cell."""
+    nb = copy.deepcopy(nb)
+    nbclient.NotebookClient(
+        nb,
+        timeout=CELL_TIMEOUT_S,
+        kernel_name="python3",
+        record_timing=False,
+        resources={"metadata": {"path": str(HERE)}},
+    ).execute(env={**os.environ, "MATPLOTLIBRC": str(HERE / "matplotlibrc")})
+    return nb
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="build only sources whose name starts so")
+    parser.add_argument("--check", action="store_true", help="compare cells, execute nothing")
+    args = parser.parse_args(argv)
+    paths = [p for p in sources() if not args.names or p.stem.startswith(tuple(args.names))]
+    if not paths:
+        parser.error(f"no notebook source matches {args.names}")
+    stale = []
+    for path in paths:
+        target = path.with_suffix(".ipynb")
+        nb = from_source(path)
+        if args.check:
+            if not target.exists() or cells(nbformat.read(target, as_version=4)) != cells(nb):
+                stale.append(target.name)
+            continue
+        nbformat.write(execute(nb), target)
+        print("wrote", target.relative_to(HERE.parent))
+    if stale:
+        print("stale (run python notebooks/build.py):", ", ".join(stale))
+    return 1 if stale else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
