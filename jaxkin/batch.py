@@ -69,6 +69,11 @@ class ProgressBar:
 
     ``chunked_map(progress=True)`` makes one, forced on. Any tqdm instance can be passed as
     ``progress`` instead.
+
+    >>> bar = ProgressBar(3, "rows", enabled=False)  # counts, draws nothing
+    >>> bar.update(2); bar.update(1); bar.close()
+    >>> bar.done, bar.active
+    (3, False)
     """
 
     def __init__(
