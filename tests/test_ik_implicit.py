@@ -197,3 +197,60 @@ def _derivatives_no_fd(solver, T, q0):
     Tk = np.repeat(T, 6, 0)
     sol, dq = solver(Tk, np.repeat(q0, 6, 0), Tk @ np.tile(GENERATORS, (n, 1, 1)))
     return sol, sol.q[::6], dq.reshape(n, 6, dof), None
+
+
+def test_singular_and_unconverged_give_finite_derivatives_and_flags(solvers):
+    """UR5 at its wrist (q5 = 0) and elbow (q3 = 0) singularities, started exactly there:
+    converged, flagged singular, finite derivatives; a target 3 m away: not converged, finite."""
+    solver = solvers("ur5")
+    robot = solver.robot
+    q_wrist = np.array([0.3, -1.0, 1.2, -0.5, 0.0, 0.4])
+    q_elbow = np.array([0.3, -1.0, 0.0, -0.5, 1.0, 0.4])
+    far = np.eye(4)
+    far[:3, 3] = [3.0, 0.0, 0.5]
+    T = np.stack([_poses(robot, [q_wrist])[0], _poses(robot, [q_elbow])[0], far])
+    q0 = np.stack([q_wrist, q_elbow, q_wrist])
+    Tk = np.repeat(T, 6, 0)
+    sol, dq = solver(Tk, np.repeat(q0, 6, 0), Tk @ np.tile(GENERATORS, (3, 1, 1)), tol=1e-10)
+    assert np.all(np.isfinite(dq)) and np.all(np.isfinite(sol.q))
+    np.testing.assert_array_equal(sol.converged, np.repeat([True, True, False], 6))
+    np.testing.assert_array_equal(sol.singular[:12], True)
+    assert np.all(sol.result[12:] == jk.ik.RESULTS.unreachable)
+    # well away from the singularities the flag is off (the random targets above assert it too)
+    assert np.max(np.abs(dq[:12])) > 1.0  # the damped derivative is large there, not zero
+
+
+# ----------------------------------------------------------------------------- TRAC-IK protocol
+@pytest.mark.parametrize("name", list(ARMS))
+def test_trac_ik_protocol_small(solvers, name):
+    """TRAC-IK's protocol on 300 targets: random configurations within the limits -> fk, one
+    seed at the middle of the limits, default arguments (tolerance 1e-10 in float64, 64 starts),
+    success = every position and orientation component within 1e-5 (checked with numpy on
+    jk.fk) and the joints within limits. Asserted: no failure on these 300 fixed targets (the
+    full 10,000-target protocol is in bench/). At each solution, derivatives are finite and
+    satisfy J dq = b."""
+    solver = solvers(name)
+    robot = solver.robot
+    rng_key = jax.random.key(2024)
+    q_star = np.asarray(jk.sample_configurations(robot, B, rng_key))
+    T = _poses(robot, q_star)
+    lo, hi = (np.asarray(b) for b in jk.sampling_bounds(robot))
+    mid = 0.5 * (lo + hi)
+    T_dot = T @ GENERATORS[np.arange(B) % 6]
+    sol, dq = solver(T, mid, T_dot, tol=1e-10)
+    Tq = _poses(robot, sol.q)
+    dp = np.abs(Tq[:, :3, 3] - T[:, :3, 3])
+    M = T[:, :3, :3] @ np.swapaxes(Tq[:, :3, :3], 1, 2)
+    dw = 0.5 * np.abs(np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0],
+                                M[:, 1, 0] - M[:, 0, 1]], 1))  # fmt: skip
+    angle_ok = np.einsum("nii->n", M) > 1.0  # the rotation angle is below pi / 2
+    within = np.all((sol.q >= np.asarray(robot.lower)) & (sol.q <= np.asarray(robot.upper)), 1)
+    ok = np.all(dp <= 1e-5, 1) & np.all(dw <= 1e-5, 1) & angle_ok & within
+    assert int(np.sum(~ok)) == 0, (name, np.flatnonzero(~ok), sol.result[~ok])
+    np.testing.assert_array_equal(sol.converged, ok)
+    assert np.all(np.isfinite(dq))
+    J = _jacobians(robot, sol.q)
+    b = _twists(T)[np.arange(B), np.arange(B) % 6]
+    regular = ~sol.singular
+    res = np.einsum("nij,nj->ni", J, dq) - b
+    assert np.max(np.abs(res[regular])) <= 1e-8 * max(1.0, np.max(np.abs(dq[regular])))
