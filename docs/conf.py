@@ -23,7 +23,7 @@ copyright = "jaxkin contributors"
 release = version = jaxkin.__version__
 
 root_doc = "docs/index"
-include_patterns = ["docs/**", "notebooks/*.ipynb", "bench/README.md", "bench/IK.md"]
+include_patterns = ["docs/**", "notebooks/*.ipynb", "notebooks/README.md", "bench/*.md"]
 exclude_patterns = ["docs/README.md", "build/**", "**/.ipynb_checkpoints"]
 
 extensions = [
