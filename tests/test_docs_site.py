@@ -47,7 +47,7 @@ def site(tmp_path_factory) -> pathlib.Path:
 def test_strict_build_has_every_page(site):
     pages = [DOCS / "index.md", *sorted(DOCS.glob("*.md")), *sorted(DOCS.glob("api/*.md"))]
     pages = [p for p in pages if p.name != "README.md"]
-    pages += sorted(ROOT.glob("notebooks/*.ipynb")) + [ROOT / "notebooks/README.md"]
+    pages += [*sorted(ROOT.glob("notebooks/*.ipynb")), ROOT / "notebooks/README.md"]
     pages += sorted(ROOT.glob("bench/*.md"))
     expected = {p.relative_to(ROOT).with_suffix(".html") for p in pages}
     missing = sorted(str(p) for p in expected if not (site / p).is_file())
