@@ -28,7 +28,7 @@ SEED = 7
 ROBOT = "scara"  # 4 joints, revolute and prismatic: compiles in well under a second
 TIMEOUT_S = 90
 
-# The child's program: the same robot, inputs and map as `_reference` below.
+# The child's program: the same robot, inputs and map as the reference in the test below.
 CHILD = textwrap.dedent(
     """
     import json, sys
