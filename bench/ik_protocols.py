@@ -337,6 +337,7 @@ def gpu_protocol(args) -> list[dict[str, Any]]:
         log(f"GPU protocol: jaxkin {label}")
         res = run_jaxkin(robot, Ts, starts[0], args.repeats, seeds=starts[1:], **kw)
         q = res.pop("q")
+        res.pop("n")
         rows.append(
             dict(
                 setting=label,
