@@ -58,6 +58,7 @@ from .jacobians import jacobian_fwd as jacobian_fwd
 from .jacobians import jacobian_rev as jacobian_rev
 from .kinematics import fk as fk
 from .kinematics import fk_all as fk_all
+from .mjcf import load_mjcf as load_mjcf
 from .model import Robot as Robot
 from .representations import analytical_from_geometric as analytical_from_geometric
 from .representations import rate_matrix as rate_matrix

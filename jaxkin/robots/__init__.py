@@ -12,7 +12,9 @@ When ``example-robot-data`` is installed, its URDFs load by ``"erd/..."`` names 
 (``load("erd/panda", tip=..., base=...)``); ``erd_names()`` lists them (they are not in
 ``names()``, which is the zoo). Well-known arms load as the chain to their standard tool frame
 (``erd/panda``: ``panda_hand_tcp``, 7 dof; ``erd/ur5_robot``: ``tool0``), the default frame;
-see :mod:`jaxkin.robots.example_robot_data`.
+see :mod:`jaxkin.robots.example_robot_data`. MJCF arm and hand models shipped inside installed
+packages (dm-control, gymnasium-robotics) load by ``"mjcf/..."`` names (``mjcf_names()``; needs
+the ``mjcf`` extra): see :mod:`jaxkin.robots.mjcf`.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from typing import Any
 from ..errors import JaxkinError, UnknownRobotError
 from ..model import Robot
 
-__all__ = ["ZooEntry", "erd_names", "info", "load", "names", "register"]
+__all__ = ["ZooEntry", "erd_names", "info", "load", "mjcf_names", "names", "register"]
 
 
 @dataclass(frozen=True)
@@ -73,8 +75,19 @@ def erd_names() -> list[str]:
     return example_robot_data.names()
 
 
+def mjcf_names() -> list[str]:
+    """Names (``"mjcf/..."``) of the MJCF models of installed packages, sorted."""
+    from . import mjcf
+
+    return mjcf.names()
+
+
 def info(name: str) -> ZooEntry:
     """The zoo entry of ``name`` (description, source, parameters)."""
+    if isinstance(name, str) and name.startswith("mjcf/"):
+        from . import mjcf
+
+        return mjcf.entry(name)
     if isinstance(name, str) and name.startswith("erd/"):
         from . import example_robot_data
 
@@ -103,4 +116,5 @@ def load(name: str, dtype: Any = None, **params: Any) -> Robot:
 from . import chapter as chapter  # noqa: E402
 from . import example_robot_data as example_robot_data  # noqa: E402
 from . import industrial as industrial  # noqa: E402
+from . import mjcf as mjcf  # noqa: E402
 from . import niryo_one as niryo_one  # noqa: E402

@@ -1,0 +1,498 @@
+"""MJCF (MuJoCo) files -> :class:`~jaxkin.Robot`, through MuJoCo's own compiler.
+
+``jk.load_mjcf(source, tip=None, base=None)`` needs the ``mjcf`` extra
+(``pip install 'jaxkin[mjcf]'``, i.e. the ``mujoco`` package). MuJoCo parses and compiles the
+file (includes, defaults and classes, ``childclass``, ``angle="degree"``, every orientation form:
+``quat``, ``euler`` with ``eulerseq``, ``axisangle``, ``xyaxes``, ``zaxis``; ``<frame>``); jaxkin
+reads the *compiled* model (``body_pos``/``body_quat``, ``jnt_pos``/``jnt_axis``, ``qpos0``,
+``jnt_range``, ``site_pos``/``site_quat``) and emits joint specs into
+:func:`jaxkin.build.from_joints`, so a pose computed by jaxkin is the one MuJoCo's
+``mj_kinematics`` computes for the same ``qpos``.
+
+Mesh, height-field, skin and texture files are never read: geoms that use them become small
+spheres and the assets are dropped before compiling (they do not move any frame). A file named
+by ``<include>`` must exist; MuJoCo's message, naming the missing file and the element, is passed
+on in a :class:`MJCFError`.
+
+What becomes what
+-----------------
+* Every body is a frame named after it (an unnamed body ``body<id>``); the world body is the
+  root frame ``world`` (or the body given as ``base=``). A body without joints is welded to its
+  parent (a fixed joint); mocap bodies are fixed at their model pose.
+* ``hinge`` -> revolute, ``slide`` -> prismatic, with MuJoCo's axis and limits (``range`` where
+  ``limited``; unbounded otherwise). A joint whose anchor (``pos``) is not the body origin, and
+  every joint of a body with several joints, gets a frame of its own at its anchor, named after
+  the joint (``joint:<name>`` when a body or site already has that name): MuJoCo applies a
+  body's joints one after the other in the body's frame, and so does the chain of frames.
+* Every site is a frame fixed to its body, named after it (``site:<name>`` when a body already
+  has that name; an unnamed site ``site<id>``).
+* ``<equality joint1 joint2 polycoef>`` with a linear polynomial (``a2 = a3 = a4 = 0``), active
+  at start, makes ``joint1`` a mimic joint of ``joint2``: MuJoCo's ``y - y0 = a0 + a1 (x - x0)``
+  (``y0``, ``x0`` from ``qpos0``). It is not an entry of ``q``; its Jacobian column folds into
+  ``joint2``'s.
+* ``connect``, ``weld`` and other equality constraints between bodies are not kinematic
+  couplings of the tree: like ``mj_kinematics``, jaxkin computes the open tree and ignores them.
+  Tendons used by actuators and sensors are ignored too.
+* Refused by name, with a :class:`MJCFError` (a :class:`jaxkin.ModelError`): ``free`` and
+  ``ball`` joints (load the part below with ``base=<its body>``), ``joint`` equalities with a
+  non-linear polynomial, without ``joint2`` or a second equality on the same joint, and tendon
+  equalities coupling joints of the loaded part.
+
+``q`` and ``qpos``
+------------------
+``q`` is MuJoCo's ``qpos`` of the loaded hinge and slide joints, in MuJoCo's order, without the
+mimic (coupled) joints: the same numbers, including MuJoCo's ``ref`` convention (a joint at
+``qpos = ref`` is at the pose the file draws; jaxkin folds ``-ref`` into the joint's placement,
+so ``q = qpos`` exactly, and ``robot.lower``/``robot.upper`` are ``jnt_range``).
+
+The default frame
+-----------------
+As for URDF (see :mod:`jaxkin.urdf`, "The default frame"): ``tip=`` (a body or site) when given;
+otherwise the end of the chain of moving joints, following fixed frames (welded bodies, sites)
+down while there is exactly one; none when the moving joints branch (then functions need
+``frame=`` and list the candidates).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import JaxkinError, ModelError
+from .model import Robot
+
+__all__ = ["MJCFDependencyError", "MJCFError", "load_mjcf"]
+
+_EXTRA = "pip install 'jaxkin[mjcf]' (or pip install mujoco)"
+
+
+class MJCFError(ModelError):
+    """An MJCF file that MuJoCo rejects, or that jaxkin cannot represent. ``file`` is the path
+    or ``"<string>"``; ``element`` names the offending element (e.g. ``"<joint name='j1'>"``)
+    when one is known."""
+
+    def __init__(self, message: str, file: str = "", element: str | None = None) -> None:
+        super().__init__(message)
+        self.file, self.element = file, element
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.file, self.element))
+
+
+class MJCFDependencyError(JaxkinError, ImportError):
+    """MuJoCo (the ``mjcf`` extra) is not installed."""
+
+
+def _mujoco():
+    try:
+        import mujoco
+    except ImportError as exc:
+        raise MJCFDependencyError(
+            f"jk.load_mjcf needs MuJoCo (>= 3.1): {_EXTRA}. Import failed with: {exc}"
+        ) from None
+    return mujoco
+
+
+# ------------------------------------------------------------------------------- compiling
+def _spec(mujoco, source: Any):
+    """MuJoCo's spec of ``source`` and a label for messages."""
+    if isinstance(source, (bytes, bytearray)):
+        source = bytes(source).decode("utf-8")
+    if isinstance(source, str) and source.lstrip("\ufeff \t\r\n").startswith("<"):
+        label, load = "<string>", lambda: mujoco.MjSpec.from_string(source)
+    elif isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        label = str(source)
+        if not path.is_file():
+            hint = "it is a directory" if path.is_dir() else "no such file"
+            raise MJCFError(
+                f"cannot read the MJCF file {label}: {hint}. Pass the path of an .xml file, or "
+                "the XML itself as a string (starting with '<').",
+                file=label,
+            )
+        load = lambda: mujoco.MjSpec.from_file(str(path))  # noqa: E731
+    else:
+        raise ModelError(
+            "source must be an MJCF path (str or os.PathLike), an XML string or bytes, got "
+            f"{type(source).__name__}."
+        )
+    try:
+        return load(), label
+    except ValueError as e:
+        raise _compiler_error(e, label, "MuJoCo could not parse the file") from None
+
+
+def _compiler_error(e: Exception, label: str, what: str) -> MJCFError:
+    text = " ".join(str(e).split())
+    return MJCFError(
+        f'{label}: {what}: {text}. Fix the element MuJoCo names (python -c "import mujoco; '
+        f"mujoco.MjModel.from_xml_path('...')\" shows the same message).",
+        file=label,
+    )
+
+
+def _strip_assets(mujoco, spec) -> None:
+    """Drop every file-backed asset (meshes, height fields, skins, textures): geoms that use
+    them become small spheres (no frame depends on a geom's shape)."""
+    file_shapes = {mujoco.mjtGeom.mjGEOM_MESH, mujoco.mjtGeom.mjGEOM_HFIELD}
+    sdf = getattr(mujoco.mjtGeom, "mjGEOM_SDF", None)
+    if sdf is not None:
+        file_shapes.add(sdf)
+    for g in spec.geoms:
+        if g.type in file_shapes:
+            g.type = mujoco.mjtGeom.mjGEOM_SPHERE
+            g.meshname = ""
+            g.hfieldname = ""
+            g.size = [0.01, 0.0, 0.0]
+    for mat in spec.materials:
+        mat.textures = [""] * len(mat.textures)
+    for group in (spec.skins, spec.meshes, spec.hfields, spec.textures):
+        for item in list(group):
+            spec.delete(item)
+
+
+def _compile(source: Any):
+    mujoco = _mujoco()
+    spec, label = _spec(mujoco, source)
+    _strip_assets(mujoco, spec)
+    spec.compiler.fusestatic = False  # every body stays a frame
+    try:
+        return mujoco, spec.compile(), label, spec.modelname
+    except ValueError as e:
+        raise _compiler_error(e, label, "MuJoCo could not compile the model") from None
+
+
+# ------------------------------------------------------------------------------ converting
+def _names(mujoco, m) -> tuple[list[str], list[str], list[str]]:
+    """Body, joint and site names (generated for unnamed elements)."""
+
+    def name(kind, i, fallback):
+        return mujoco.mj_id2name(m, kind, i) or fallback
+
+    bodies = [name(mujoco.mjtObj.mjOBJ_BODY, b, f"body{b}") for b in range(m.nbody)]
+    bodies[0] = "world"
+    joints = [name(mujoco.mjtObj.mjOBJ_JOINT, j, f"joint{j}") for j in range(m.njnt)]
+    sites = [name(mujoco.mjtObj.mjOBJ_SITE, s, f"site{s}") for s in range(m.nsite)]
+    return bodies, joints, sites
+
+
+def _quat_matrix(q) -> np.ndarray:
+    w, x, y, z = (float(v) for v in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' rotation about a unit axis."""
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def _T(R: np.ndarray | None = None, p=None) -> np.ndarray:
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if p is not None:
+        T[:3, 3] = p
+    return T
+
+
+def _fixed(name: str, parent: str, child: str, T: np.ndarray) -> dict[str, Any]:
+    return dict(name=name, type="fixed", parent=parent, child=child, transform=T)
+
+
+_JOINT_TYPES = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}
+
+
+def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
+    """Joint specs that place body ``b`` (and its joints' anchor frames) in its parent."""
+    bodies, joints, frame_name = names
+    parent = bodies[int(m.body_parentid[b])]
+    T = _T(_quat_matrix(m.body_quat[b]), m.body_pos[b])
+    adr, num = int(m.body_jntadr[b]), int(m.body_jntnum[b])
+    if num == 0:
+        return [_fixed(f"weld:{bodies[b]}", parent, bodies[b], T)]
+    specs: list[dict[str, Any]] = []
+    for k, j in enumerate(range(adr, adr + num)):
+        jtype = _JOINT_TYPES[int(m.jnt_type[j])]
+        spec: dict[str, Any] = dict(name=joints[j], parent=parent)
+        if jtype in ("free", "ball"):
+            spec["refused"] = MJCFError(
+                f"{label}: joint {joints[j]!r} of body {bodies[b]!r} is a {jtype} joint "
+                f"({'6-DOF free motion' if jtype == 'free' else '3-DOF rotation'}); jaxkin "
+                "models hinge and slide joints only, and does not weld it silently. Load what "
+                f"hangs below it with base={bodies[b]!r} (poses are then relative to that "
+                "body), or change its type in the file.",
+                file=label,
+                element=f"<joint name={joints[j]!r} type={jtype!r}>",
+            )
+            jtype = "hinge"  # placeholder, never built
+        axis = np.array(m.jnt_axis[j], dtype=float)
+        ref = float(m.qpos0[m.jnt_qposadr[j]])
+        anchor = np.array(m.jnt_pos[j], dtype=float) if jtype == "hinge" else np.zeros(3)
+        if jtype == "hinge":  # Rot(axis, qpos - ref) = Rot(axis, -ref) Rot(axis, qpos)
+            T = T @ _T(_axis_rotation(axis, -ref), anchor)
+        else:  # Trans(axis (qpos - ref)) = Trans(-ref axis) Trans(axis qpos)
+            T = T @ _T(None, -ref * axis)
+        # Its own frame at the anchor, unless it is the body's last joint and sits at its origin.
+        last, at_origin = k == num - 1, not np.any(anchor != 0.0)
+        child = bodies[b] if last and at_origin else frame_name(joints[j])
+        lo, hi = (-math.inf, math.inf)
+        if m.jnt_limited[j]:
+            lo, hi = (float(v) for v in m.jnt_range[j])
+        spec.update(
+            type="revolute" if jtype == "hinge" else "prismatic",
+            child=child,
+            transform=T,
+            axis=axis,
+            lower=lo,
+            upper=hi,
+        )
+        specs.append(spec)
+        parent = child
+        T = _T(None, -anchor)
+    if specs[-1]["child"] != bodies[b]:
+        specs.append(_fixed(f"weld:{bodies[b]}", parent, bodies[b], T))
+    return specs
+
+
+def _all_specs(mujoco, m, label: str) -> tuple[list[dict[str, Any]], dict[str, str]]:
+    """Specs of every body, joint anchor and site (parents first), and frame -> body name."""
+    bodies, joints, sites = _names(mujoco, m)
+    taken = set(bodies)
+
+    def frame_name(n: str, prefix: str = "joint") -> str:
+        return n if n not in taken else f"{prefix}:{n}"
+
+    specs: list[dict[str, Any]] = []
+    for b in range(1, m.nbody):
+        specs += _body_specs(m, b, (bodies, joints, frame_name), label)
+    taken |= {s["child"] for s in specs}
+    for s in range(m.nsite):
+        b = int(m.site_bodyid[s])
+        T = _T(_quat_matrix(m.site_quat[s]), m.site_pos[s])
+        child = frame_name(sites[s], "site")
+        taken.add(child)
+        specs.append(_fixed(f"site:{sites[s]}", bodies[b], child, T))
+    return specs, {s["child"]: s["parent"] for s in specs}
+
+
+def _order(specs: list[dict[str, Any]], root: str) -> list[dict[str, Any]]:
+    """The specs below ``root``, depth-first (parents first, siblings in order)."""
+    children: dict[str, list[dict[str, Any]]] = {}
+    for s in specs:
+        children.setdefault(s["parent"], []).append(s)
+    out, stack = [], list(reversed(children.get(root, [])))
+    while stack:
+        s = stack.pop()
+        out.append(s)
+        stack.extend(reversed(children.get(s["child"], [])))
+    return out
+
+
+def _select(specs, parent_of, root: str, tip: str | None, label: str, known: Sequence[str]):
+    for what, name in (("base", root), ("tip", tip)):
+        if name is not None and name not in known:
+            shown = list(known[:8])
+            raise MJCFError(
+                f"{label}: {what}={name!r} is not a {'body' if what == 'base' else 'body or site'}"
+                f" of the model (frames: {shown}{' ...' if len(known) > 8 else ''}).",
+                file=label,
+            )
+    below = _order(specs, root)
+    if tip is None:
+        return below
+    by_child = {s["child"]: s for s in below}
+    if tip != root and tip not in by_child:
+        raise MJCFError(
+            f"{label}: tip {tip!r} is not below base {root!r}; choose a base that is an "
+            "ancestor of the tip (or leave base=None).",
+            file=label,
+        )
+    path, frame = [], tip
+    while frame != root:
+        path.append(by_child[frame])
+        frame = parent_of[frame]
+    return path[::-1]
+
+
+def _couplings(mujoco, m, label: str, selected: set[str], joint_names: list[str]):
+    """Mimic specs ``{follower: mimic}`` from active joint equalities; refusals by name."""
+    mimic: dict[str, dict[str, float | str]] = {}
+    tendon_joints = _tendon_joints(mujoco, m, joint_names)
+    for e in range(m.neq):
+        if not m.eq_active0[e]:
+            continue
+        etype = int(m.eq_type[e])
+        ename = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"equality {e}"
+        where = f"<equality name={ename!r}>"
+        if etype == int(mujoco.mjtEq.mjEQ_TENDON):
+            t1, t2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+            coupled = set(tendon_joints[t1]) | (set(tendon_joints[t2]) if t2 >= 0 else set())
+            if coupled & selected:
+                raise MJCFError(
+                    f"{label}: tendon equality {ename!r} couples joints "
+                    f"{sorted(coupled & selected)} through tendons; jaxkin represents linear "
+                    "joint couplings (<equality joint1 joint2 polycoef>) only. Load a part "
+                    "without these joints (tip=/base=), or write the coupling as a joint "
+                    "equality.",
+                    file=label,
+                    element=where,
+                )
+            continue
+        if etype != int(mujoco.mjtEq.mjEQ_JOINT):
+            continue  # connect, weld, ...: not couplings of the tree (mj_kinematics ignores them)
+        y, x = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+        follower = joint_names[y]
+        if follower not in selected:
+            continue
+        a = [float(v) for v in m.eq_data[e][:5]]
+        problem = None
+        if x < 0:
+            problem = "has no joint2 (it holds joint1 at a constant)"
+        elif any(c != 0.0 for c in a[2:]):
+            problem = f"has a non-linear polycoef {a} (a2, a3, a4 must be 0)"
+        elif follower in mimic:
+            problem = f"is a second equality on joint {follower!r}"
+        if problem is not None:
+            raise MJCFError(
+                f"{label}: joint equality {ename!r} on joint {follower!r} {problem}; jaxkin "
+                "represents y - y0 = a0 + a1 (x - x0) between two hinge or slide joints only. "
+                "Remove it, make it linear, or load a part without that joint (tip=/base=).",
+                file=label,
+                element=where,
+            )
+        y0, x0 = float(m.qpos0[m.jnt_qposadr[y]]), float(m.qpos0[m.jnt_qposadr[x]])
+        mimic[follower] = {
+            "joint": joint_names[x],
+            "multiplier": a[1],
+            "offset": y0 + a[0] - a[1] * x0,
+        }
+    return mimic
+
+
+def _tendon_joints(mujoco, m, joint_names: list[str]) -> list[list[str]]:
+    out = []
+    for t in range(m.ntendon):
+        adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+        out.append(
+            [
+                joint_names[int(m.wrap_objid[w])]
+                for w in range(adr, adr + num)
+                if int(m.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT)
+            ]
+        )
+    return out
+
+
+def _default_frames(root: str, specs: Sequence[Mapping[str, Any]]) -> tuple[str, ...]:
+    """The end frames of the moving joints' branches (see "The default frame")."""
+    children: dict[str, list[Mapping[str, Any]]] = {root: []}
+    for s in specs:
+        children.setdefault(s["parent"], []).append(s)
+        children.setdefault(s["child"], [])
+    moving_below = dict.fromkeys(children, False)
+    for s in reversed(specs):
+        if s["type"] != "fixed" or moving_below[s["child"]]:
+            moving_below[s["parent"]] = True
+    ends = [s for s in specs if s["type"] != "fixed" and not moving_below[s["child"]]]
+    out = []
+    for s in ends:
+        frame = s["child"]
+        while len(children[frame]) == 1:
+            frame = children[frame][0]["child"]
+        out.append(frame)
+    return tuple(out)
+
+
+def load_mjcf(
+    source: Any,
+    tip: str | None = None,
+    base: str | None = None,
+    *,
+    dtype: Any = None,
+    name: str | None = None,
+) -> Robot:
+    """Load an MJCF (MuJoCo) model as a :class:`~jaxkin.Robot` (see the module doc).
+
+    Args:
+      source: a path (``str`` or ``os.PathLike``) or the XML as ``str`` or ``bytes``.
+      tip: optional body or site name: keep only the chain from ``base`` to it (then the
+        default frame of ``fk``/``geometric_jacobian``).
+      base: optional body name: the root of the result (default: the world body, ``"world"``);
+        its frame is the world frame of the result.
+      dtype: float32 or float64 (default: JAX's default float).
+      name: the robot's name (default: ``<mujoco model=...>``).
+
+    Returns:
+      A placement robot whose ``q`` is MuJoCo's ``qpos`` of its hinge and slide joints (coupled
+      joints left out) and whose frames are the bodies, joint anchors and sites; poses and
+      Jacobians in the world frame of MuJoCo (``T_world_frame``; rows ``[v; omega]``).
+
+    Raises:
+      MJCFError: MuJoCo rejects the file, or it holds what jaxkin cannot represent (free and
+        ball joints, non-linear couplings, ...), named.
+      MJCFDependencyError: MuJoCo is not installed (``pip install 'jaxkin[mjcf]'``).
+
+    >>> import jaxkin as jk
+    >>> robot = jk.load_mjcf(
+    ...     '''<mujoco model="arm"><worldbody><body name="upper">
+    ...       <joint name="shoulder" axis="0 0 1"/><geom size=".05"/>
+    ...       <body name="fore" pos="1 0 0"><joint name="elbow" axis="0 0 1" range="-90 90"/>
+    ...         <geom size=".05"/><site name="hand" pos="1 0 0"/></body></body>
+    ...     </worldbody></mujoco>'''
+    ... )
+    >>> robot.joint_names, robot.frame_names[-1], robot.frame_names[robot.tip_frame]
+    (('shoulder', 'elbow'), 'hand', 'hand')
+    >>> round(float(robot.upper[1]), 6)  # degrees in the file (MuJoCo's default), radians here
+    1.570796
+    >>> [round(float(x), 6) for x in jk.fk(robot, [0.0, 1.5707963267948966])[:3, 3]]
+    [1.0, 1.0, 0.0]
+    """
+    mujoco, m, label, model_name = _compile(source)
+    specs, parent_of = _all_specs(mujoco, m, label)
+    root = "world" if base is None else base
+    body_names, joint_names, _ = _names(mujoco, m)
+    if base is not None and base not in body_names:
+        _select(specs, parent_of, base, None, label, body_names)  # raises, naming base
+    chosen = _select(specs, parent_of, root, tip, label, ["world", *parent_of])
+    for s in chosen:
+        if "refused" in s:
+            raise s["refused"]
+    selected = {s["name"] for s in chosen if s["type"] != "fixed"}
+    mimic = _couplings(mujoco, m, label, selected, joint_names)
+    leaders: dict[str, dict[str, Any]] = {}
+    all_moving = {s["name"]: s for s in specs if s["type"] != "fixed" and "refused" not in s}
+    for s in chosen:
+        if s["name"] in mimic:
+            s["mimic"] = mimic[s["name"]]
+            lead = mimic[s["name"]]["joint"]
+            if lead not in selected and lead in all_moving:
+                src = all_moving[lead]
+                leaders[lead] = {k: src[k] for k in ("name", "type", "lower", "upper")}
+    out = [{k: v for k, v in s.items() if k != "refused"} for s in chosen]
+    try:
+        return Robot.from_joints(
+            out,
+            root=root,
+            name=name or model_name or "mjcf",
+            dtype=dtype,
+            leaders=list(leaders.values()),
+            default_frames=_default_frames(root, out),
+        )
+    except MJCFError:
+        raise
+    except ModelError as e:
+        raise MJCFError(f"{label}: {e}", file=label) from None
