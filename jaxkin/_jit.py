@@ -94,9 +94,11 @@ def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
     :func:`jaxkin.kinematics.scalar_pass`) and cached under ``(kernel, robot, static)``; the
     robot is an immutable value, so an equal robot shares the executable and a changed one
     (``robot.replace(...)``) gets its own. ``jax.jit`` compiles once per array shape and dtype.
-    At most :data:`EAGER_CACHE_SIZE` keys are kept.
+    At most :data:`EAGER_CACHE_SIZE` keys are kept. Inside ``jax.disable_jit()`` the kernel runs
+    op by op and nothing is cached (cheaper for a robot used once, e.g. a property test over
+    random robots).
     """
-    if inside_trace() or not robot.is_concrete or is_traced(arrays):
+    if inside_trace() or not robot.is_concrete or is_traced(arrays) or _jit_disabled():
         return kernel(robot, *static, *arrays)
     key = (kernel, robot, static)
     try:
@@ -113,6 +115,11 @@ def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
     _eager_cache[key] = entry
     _evict()
     return entry(*arrays)
+
+
+def _jit_disabled() -> bool:
+    """True inside ``jax.disable_jit()``: kernels then run op by op and nothing is cached."""
+    return bool(jax.config.jax_disable_jit)
 
 
 def _evict() -> None:

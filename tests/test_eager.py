@@ -134,3 +134,15 @@ def test_the_cache_bound_holds_over_random_robots(robot_and_q):
     jk.geometric_jacobian(robot, q)
     jk.fk(robot, q)
     assert _jit.eager_cache_info()["entries"] <= _jit.EAGER_CACHE_SIZE
+
+
+def test_disable_jit_runs_op_by_op_and_caches_nothing(puma):
+    robot, q, qd = puma
+    with jax.disable_jit():
+        J = jk.geometric_jacobian(robot, q)
+        V = jk.twist(robot, q, qd)
+    assert _jit.eager_cache_info()["entries"] == 0
+    np.testing.assert_allclose(np.asarray(V), np.asarray(J @ qd), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        np.asarray(J), np.asarray(jk.geometric_jacobian(robot, q)), rtol=0, atol=1e-15
+    )
