@@ -70,8 +70,9 @@ def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
     zero = (0.0, 0.0, 0.0)
     Jv = [zero] * robot.dof
     Jw = [zero] * robot.dof
-    mult = _multipliers(robot)
-    for j in robot.ancestors(frame):
+    path = robot.ancestors(frame)
+    mult = _multipliers(robot, path)
+    for j in path:
         kind = robot.kinds[j]
         if kind == "fixed":
             continue
@@ -87,18 +88,50 @@ def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
     return Jv, Jw
 
 
-def _multipliers(robot: Robot) -> list:
+def _multipliers(robot: Robot, joints) -> dict:
     m = robot.multiplier
     if is_traced(m):
-        return [m[j] for j in range(robot.n_joints)]
-    return [float(x) for x in np.asarray(m, dtype=np.float64)]
+        return {j: m[j] for j in joints}
+    m = np.asarray(m, dtype=np.float64)
+    return {j: float(m[j]) for j in joints}
+
+
+ZERO_RUN = 16
 
 
 def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
-    """(6, dof) array from per-column 3-vectors of scalars."""
-    rows = [[Jv[k][i] for k in range(len(Jv))] for i in range(3)]
-    rows += [[Jw[k][i] for k in range(len(Jw))] for i in range(3)]
-    return fold.stack_matrix(rows, dtype)
+    """(6, dof) array from per-column 3-vectors of scalars.
+
+    Runs of at least ``ZERO_RUN`` all-zero constant columns (joints off the frame's path in a
+    large tree) become one zeros block instead of one literal per entry."""
+    dof = len(Jv)
+
+    def block(cols):
+        rows = [[Jv[k][i] for k in cols] for i in range(3)]
+        rows += [[Jw[k][i] for k in cols] for i in range(3)]
+        return fold.stack_matrix(rows, dtype)
+
+    zero = [all(fold.is_const(x) and x == 0.0 for x in (*Jv[k], *Jw[k])) for k in range(dof)]
+    pieces, start = [], 0
+    k = 0
+    while k < dof:
+        if not zero[k]:
+            k += 1
+            continue
+        end = k
+        while end < dof and zero[end]:
+            end += 1
+        if end - k >= ZERO_RUN:
+            if k > start:
+                pieces.append(block(range(start, k)))
+            pieces.append(jnp.zeros((6, end - k), dtype))
+            start = end
+        k = end
+    if not pieces:
+        return block(range(dof))
+    if start < dof:
+        pieces.append(block(range(start, dof)))
+    return jnp.concatenate(pieces, axis=1)
 
 
 def geometric_jacobian(
@@ -228,7 +261,7 @@ def jacobian_pass(
     """
     if uses_scan(robot):
         return _jacobian_pass_scan(robot, q, f, point, reference)
-    sp = scalar_pass(robot, q)
+    sp = scalar_pass(robot, q, frames=(f,))
     pt = None if point is None else point.astype(sp.dtype)
     R, p = sp.R[f], sp.p[f]
     target = p if pt is None else fold.vadd(p, fold.matvec(R, tuple(pt[i] for i in range(3))))

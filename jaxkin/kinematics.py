@@ -27,6 +27,7 @@ __all__ = [
     "fk_all",
     "forward_pass",
     "frame_pose",
+    "path_joints",
     "scalar_pass",
     "scan_pass",
     "uses_scan",
@@ -48,12 +49,24 @@ class _Constants(NamedTuple):
 SNAP = 1e-15
 
 
-def _snap(x) -> float:
-    """A concrete constant as a Python float; within 1e-15 of 0 or +-1 it is taken as exact
-    (cos(pi/2) evaluates to 6e-17 in float64), so +-90 degree placements fold away."""
+def snap_tolerance(dtype) -> float:
+    """How far from 0 or +-1 a concrete constant of a robot stored in ``dtype`` is taken as exact.
+
+    float64: 1e-15 (``cos(pi/2)`` evaluates to 6e-17). float32: the angles themselves are rounded
+    to float32 (``float32(pi/2)`` is 4.4e-8 from pi/2, so its cosine is -4.4e-8), up to half an
+    ulp of an angle below 2 pi: 2.4e-7; ``4 * eps32`` (4.8e-7) covers it. Snapping moves a float32
+    result by about that much times the reach, far inside float32 tolerances, and gives the
+    float32 program the structure of the float64 one (the +-90 degree placements fold away).
+    """
+    return max(SNAP, 4.0 * float(np.finfo(np.dtype(dtype)).eps))
+
+
+def _snap(x, tol: float = SNAP) -> float:
+    """A concrete constant as a Python float; within ``tol`` of 0 or +-1 it is taken as exact
+    (see :func:`snap_tolerance`), so +-90 degree placements fold away."""
     x = float(x)
     for exact in (0.0, 1.0, -1.0):
-        if abs(x - exact) <= SNAP:
+        if abs(x - exact) <= tol:
             return exact
     return x
 
@@ -64,40 +77,56 @@ def _scalars(x, to_scalar):
     return tuple(_scalars(x[i], to_scalar) for i in range(x.shape[0]))
 
 
-def _constants(robot: Robot, dtype) -> _Constants:
+def _constants(robot: Robot, dtype, joints: list | None = None) -> _Constants:
     """Everything the forward pass needs from the model, as scalars.
 
     With concrete leaves (a robot closed over by ``jit``, or eager use) the constants are Python
     floats computed in float64 and folded into the kernel; with traced leaves (``jit`` over the
     robot, ``grad`` with respect to its parameters, ``vmap`` over a stack of robots) they are JAX
-    scalars and new values never retrace.
+    scalars and new values never retrace. Only the ``joints`` listed (default: all) are
+    converted; the per-joint lists hold None for the others.
     """
     if not is_traced(robot):
         xp, conv = np, lambda a: np.asarray(a, dtype=np.float64)
-        to_scalar = _snap
+        tol = snap_tolerance(robot.dtype)
+        to_scalar = lambda a: _snap(a, tol)  # noqa: E731
     else:
         xp, conv = jnp, lambda a: jnp.asarray(a).astype(dtype)
         to_scalar = lambda a: a  # noqa: E731
     place = joint_placements(robot, dtype, xp=xp)
     n = robot.n_joints
+    idx = range(n) if joints is None else joints
+
+    def per_joint(a) -> list:
+        out: list = [None] * n
+        if joints is not None and xp is jnp:
+            # one gather of the path's rows: its transpose (grad over the robot) is one
+            # scatter, not one full-size pad per joint
+            a = a[np.asarray(joints, dtype=np.int32)]
+            for k, j in enumerate(joints):
+                out[j] = _scalars(a[k], to_scalar)
+            return out
+        for j in idx:
+            out[j] = _scalars(a[j], to_scalar)
+        return out
 
     def pairs(pl):
         if pl is None:
             return None
-        R, p = _scalars(pl[0], to_scalar), _scalars(pl[1], to_scalar)
-        return [(R[j], p[j]) for j in range(n)]
+        return list(zip(per_joint(pl[0]), per_joint(pl[1]), strict=True))
 
-    axis = _scalars(conv(robot.axis), to_scalar)
     if robot.parameterisation != "placement":
         axis = [(0.0, 0.0, 1.0)] * n  # DH joints move about z by construction
+    else:
+        axis = per_joint(conv(robot.axis))
     base = conv(robot.base)
     tool = conv(robot.tool)
     return _Constants(
         B=pairs(place.B),
         A=pairs(place.A),
-        axis=list(axis),
-        offset=list(_scalars(conv(robot.offset), to_scalar)),
-        mult=list(_scalars(conv(robot.multiplier), to_scalar)),
+        axis=axis,
+        offset=per_joint(conv(robot.offset)),
+        mult=per_joint(conv(robot.multiplier)),
         base=(_scalars(base[:3, :3], to_scalar), _scalars(base[:3, 3], to_scalar)),
         tool=(_scalars(tool[:3, :3], to_scalar), _scalars(tool[:3, 3], to_scalar))
         if robot.has_tool
@@ -105,16 +134,16 @@ def _constants(robot: Robot, dtype) -> _Constants:
     )
 
 
-def _joint_trig(robot: Robot, K: _Constants, qv: list) -> dict:
-    """cos and sin of every revolute joint's value, computed once and materialised together.
+def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
+    """cos and sin of each revolute joint's value among ``joints``, computed once and together.
 
-    The optimisation barrier stops XLA from re-deriving them inside each fusion of the kernel
-    (it otherwise duplicates the transcendental ops into every consumer).
+    The optimisation barrier asks XLA not to re-derive them inside each fusion of the kernel
+    (its CPU pipeline may still drop it; see PERFORMANCE.md).
     """
     values = {}
-    for j, (kind, qi) in enumerate(zip(robot.kinds, robot.q_index, strict=True)):
-        if kind == "revolute":
-            values[j] = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
+    for j in joints:
+        if robot.kinds[j] == "revolute":
+            values[j] = fold.add(fold.mul(K.mult[j], qv[robot.q_index[j]]), K.offset[j])
     if not values:
         return {}
     keys = list(values)
@@ -124,7 +153,10 @@ def _joint_trig(robot: Robot, K: _Constants, qv: list) -> dict:
 
 
 class ScalarPass(NamedTuple):
-    """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`."""
+    """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`.
+
+    When the pass was asked for some frames only, the entries of frames and joints off their
+    paths are None."""
 
     R: list  # per frame: Mat
     p: list  # per frame: Vec
@@ -133,30 +165,46 @@ class ScalarPass(NamedTuple):
     dtype: Any
 
 
-def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
-    """One pass from the base to every frame, elementwise and with constants folded.
+def path_joints(robot: Robot, frames) -> list:
+    """Joints on the paths from the base to ``frames`` (frame indices), in increasing order."""
+    joints: set = set()
+    for f in frames:
+        joints.update(robot.ancestors(f))
+    return sorted(joints)
+
+
+def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
+    """One pass from the base to every frame (or to ``frames`` only: frame indices), elementwise
+    and with constants folded.
 
     Each joint's sin and cos are computed once; placements are composed entry by entry, so XLA
-    fuses the kernel into a single loop over a batch. ``q`` must be validated (``check_q``).
+    fuses the kernel into a single loop over a batch. With ``frames`` only the joints on their
+    paths are traced (one frame of a large tree costs its depth, not the tree's size). ``q`` must
+    be validated (``check_q``).
     """
     dtype = result_dtype(robot, q)
     q = q.astype(dtype)
-    K = _constants(robot, dtype)
-    qv = [q[i] for i in range(robot.dof)]
-    trig = _joint_trig(robot, K, qv)
-    Rs, ps = [K.base[0]], [K.base[1]]
-    zs, os = [], []
-    for j, (kind, parent, qi) in enumerate(
-        zip(robot.kinds, robot.parents, robot.q_index, strict=True)
-    ):
+    n = robot.n_joints
+    joints = list(range(n)) if frames is None else path_joints(robot, frames)
+    K = _constants(robot, dtype, None if frames is None else joints)
+    used = sorted({robot.q_index[j] for j in joints if robot.kinds[j] != "fixed"})
+    qv = {i: q[i] for i in used}
+    trig = _joint_trig(robot, K, qv, joints)
+    Rs: list = [None] * robot.n_frames
+    ps: list = [None] * robot.n_frames
+    zs: list = [None] * n
+    os: list = [None] * n
+    Rs[0], ps[0] = K.base
+    for j in joints:
+        kind, parent, qi = robot.kinds[j], robot.parents[j], robot.q_index[j]
         R, p = Rs[parent], ps[parent]
         if K.B is not None:
             Rb, pb = K.B[j]
             p = fold.vadd(p, fold.matvec(R, pb))
             R = fold.matmul(R, Rb)
         z = fold.matvec(R, K.axis[j])
-        zs.append(z)
-        os.append(p)
+        zs[j] = z
+        os[j] = p
         if kind != "fixed":
             value = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
             if kind == "revolute":
@@ -168,12 +216,12 @@ def scalar_pass(robot: Robot, q: jax.Array) -> ScalarPass:
             Ra, pa = K.A[j]
             p = fold.vadd(p, fold.matvec(R, pa))
             R = fold.matmul(R, Ra)
-        Rs.append(R)
-        ps.append(p)
-    if K.tool is not None:
-        R, p = Rs[-1], ps[-1]
-        ps.append(fold.vadd(p, fold.matvec(R, K.tool[1])))
-        Rs.append(fold.matmul(R, K.tool[0]))
+        Rs[j + 1] = R
+        ps[j + 1] = p
+    if K.tool is not None and (frames is None or n + 1 in frames):
+        R, p = Rs[n], ps[n]
+        ps[n + 1] = fold.vadd(p, fold.matvec(R, K.tool[1]))
+        Rs[n + 1] = fold.matmul(R, K.tool[0])
     return ScalarPass(R=Rs, p=ps, z=zs, o=os, dtype=dtype)
 
 
@@ -263,7 +311,7 @@ def frame_pose(robot: Robot, q: jax.Array, frame: int) -> tuple[jax.Array, jax.A
     if uses_scan(robot):
         fp = scan_pass(robot, q)
         return fp.R[frame], fp.p[frame]
-    sp = scalar_pass(robot, q)
+    sp = scalar_pass(robot, q, frames=(frame,))
     return fold.stack_matrix(sp.R[frame], sp.dtype), fold.stack_matrix(sp.p[frame], sp.dtype)
 
 
@@ -311,7 +359,7 @@ def frame_transform(robot: Robot, f: int, q: jax.Array) -> jax.Array:
     if uses_scan(robot):
         R, p = frame_pose(robot, q, f)
         return spatial.make_transform(R, p)
-    sp = scalar_pass(robot, q)
+    sp = scalar_pass(robot, q, frames=(f,))
     return _pose(sp.R[f], sp.p[f], sp.dtype)
 
 

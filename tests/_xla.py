@@ -1,10 +1,15 @@
-"""Shared test helper: XLA options that cut the compile time of one-off jitted test kernels.
+"""Shared test helpers: XLA options that cut the compile time of one-off jitted test kernels, and
+op counts of a kernel's jaxpr and compiled HLO (speed guarded by structure, not by the clock).
 
 Compiling jaxkin's unrolled kernels costs seconds per robot; these options halve that without
 changing results (no fast-math). Empty if this jax/XLA does not know one of them.
 """
 
+import collections
+import re
+
 import jax
+import jax.extend.core
 
 
 def _fast_compile_options() -> dict:
@@ -22,3 +27,30 @@ def _fast_compile_options() -> dict:
 
 
 FAST_COMPILE = _fast_compile_options()
+
+
+def jaxpr_eqns(fn, *args) -> list:
+    """Every equation of the jaxpr of ``fn(*args)``, sub-jaxprs (jit, scan, custom rules)
+    included: what a kernel traces, independent of XLA."""
+    eqns: list = []
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            eqns.append(eqn)
+            for sub in jax.extend.core.jaxprs_in_params(eqn.params):
+                walk(sub)
+
+    walk(jax.make_jaxpr(fn)(*args).jaxpr)
+    return eqns
+
+
+def jaxpr_counts(fn, *args) -> collections.Counter:
+    """How many equations of each primitive :func:`jaxpr_eqns` finds."""
+    return collections.Counter(e.primitive.name for e in jaxpr_eqns(fn, *args))
+
+
+def hlo_counts(fn, *args) -> collections.Counter:
+    """How many instructions of each opcode the compiled (optimised) HLO of ``jax.jit(fn)`` holds,
+    fused computations included (``fusion`` counts the fused kernels XLA emits)."""
+    text = jax.jit(fn).lower(*args).compile().as_text()
+    return collections.Counter(re.findall(r"=\s*[^\s=]+\s+([a-z][a-z0-9\-]*)\(", text))
