@@ -64,7 +64,10 @@ The XML is parsed by expat with handlers that refuse any document type declarati
 entity or notation declaration before any of it is processed: no entity is ever expanded, no
 external entity, file or URL is ever resolved. Input is capped at ``max_bytes`` (default
 :data:`DEFAULT_MAX_BYTES`) before parsing. Mesh references are never opened, ``package://`` URLs
-never resolved, xacro never run (a file with ``xacro:`` elements is refused). Every tree
+never resolved, xacro never run by the parser (a file with ``xacro:`` elements is refused);
+:func:`load_urdf` given a ``.xacro`` path (or ``xacro_args``) expands it with the ``xacro``
+package first (the ``xacro`` extra), which evaluates the file's expressions and reads the files it
+includes: the parser's guarantees then hold for the expanded URDF. Every tree
 algorithm is iterative and linear (no recursion limit: a 3,000-joint chain, or a 3,000-joint
 chain of mimic joints, loads in about a second).
 
@@ -81,7 +84,7 @@ import difflib
 import math
 import os
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -335,7 +338,8 @@ def _read_path(source: str | os.PathLike, max_bytes: int) -> tuple[bytes, str]:
             "this is a xacro file; jaxkin never runs xacro (it executes code and reads other "
             "files).",
             file=label,
-            fix=f"expand it first: `xacro {label} > robot.urdf`, then load robot.urdf.",
+            fix=f"load it with jk.load_urdf({label!r}) (expands it with the xacro package: "
+            f"{_XACRO_EXTRA}), or expand it first: `xacro {label} > robot.urdf`.",
         )
     data = _read_file(path, label, max_bytes)
     if len(data) > max_bytes:
@@ -1036,6 +1040,7 @@ def load_urdf(
     max_bytes: int = DEFAULT_MAX_BYTES,
     dtype: Any = None,
     name: str | None = None,
+    xacro_args: Mapping[str, Any] | None = None,
 ) -> Robot:
     """Load a URDF as a :class:`~jaxkin.Robot` (a placement robot; see the module doc).
 
@@ -1048,6 +1053,9 @@ def load_urdf(
       max_bytes: size cap (default 16 MiB), checked before parsing.
       dtype: float32 or float64 (default: JAX's default float).
       name: the robot's name (default: the URDF's ``<robot name>``).
+      xacro_args: ``name -> value`` of the file's ``<xacro:arg>`` (``xacro robot.urdf.xacro
+        name:=value``). A path ending in ``.xacro`` (or any path given with ``xacro_args``) is
+        first expanded with the ``xacro`` package (``pip install 'jaxkin[xacro]'``).
 
     Returns:
       A robot whose ``frame_names`` are the selected links (``base`` first, then depth-first,
@@ -1060,7 +1068,10 @@ def load_urdf(
       URDFError: invalid or refused file (a :class:`jaxkin.ModelError`), with file, line,
         element, attribute, value and a fix in the message.
     """
-    model = parse_urdf(source, max_bytes=max_bytes)
+    if xacro_args is not None or _is_xacro_path(source):
+        model = _parse_xacro(source, xacro_args or {}, max_bytes)
+    else:
+        model = parse_urdf(source, max_bytes=max_bytes)
     ctx = _Context(model.file)
     root, joints = _select(model, tip, base, ctx)
     _refuse_unsupported(ctx, joints)
@@ -1092,6 +1103,57 @@ def load_urdf(
         raise
     except ModelError as e:  # pragma: no cover - the parser validates everything first
         raise ctx.error(f"invalid model: {e}") from None
+
+
+_XACRO_EXTRA = "pip install 'jaxkin[xacro]' (or pip install xacro)"
+
+
+def _is_xacro_path(source: Any) -> bool:
+    if isinstance(source, str) and _looks_like_xml(source):
+        return False
+    return isinstance(source, (str, os.PathLike)) and str(source).endswith(".xacro")
+
+
+def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int) -> URDFModel:
+    """Expand the xacro file ``source`` with the ``xacro`` package, then parse the result."""
+    if not isinstance(source, (str, os.PathLike)) or (
+        isinstance(source, str) and _looks_like_xml(source)
+    ):
+        raise ModelError("xacro_args needs the path of a .xacro file as source.")
+    label = str(source)
+    try:
+        import xacro
+    except ImportError as exc:
+        raise URDFError(
+            f"expanding a xacro file needs the xacro package ({exc}).",
+            file=label,
+            fix=f"{_XACRO_EXTRA}, or expand it first: `xacro {label} > robot.urdf`.",
+        ) from None
+    if not Path(source).is_file():
+        raise URDFError("cannot read the xacro file: no such file.", file=label)
+    mappings = {str(k): str(v) for k, v in args.items()}
+    try:
+        text = xacro.process_file(str(source), mappings=mappings).toxml()
+    except Exception as e:  # xacro raises many kinds (XacroException, NameError, OSError)
+        raise URDFError(
+            f"xacro could not expand the file: {type(e).__name__}: {' '.join(str(e).split())}",
+            file=label,
+            fix="fix the file or its arguments (xacro_args={'name': 'value'} for "
+            "<xacro:arg name=...>); `xacro FILE name:=value` shows the same error.",
+        ) from None
+    try:
+        model = parse_urdf(text.encode("utf-8"), max_bytes=max_bytes)
+    except URDFError as e:
+        raise URDFError(
+            f"{e.problem} (in the URDF that xacro expanded)",
+            file=label,
+            line=e.line,
+            element=e.element,
+            attribute=e.attribute,
+            value=e.value,
+            fix=e.fix,
+        ) from None
+    return URDFModel(model.name, label, model.links, model.joints, model.root)
 
 
 def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:

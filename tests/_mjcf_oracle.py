@@ -93,15 +93,20 @@ def check(m, robot: jk.Robot, qs: np.ndarray, *, jac_frames=None, tol: float = 1
         )
         for f in jac_frames
     }
+    root = robot.frame_names[0]  # "world", or the base body: poses and axes relative to it
+    base = None if root == "world" else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, root)
     for row, q in enumerate(qs):
         d.qpos[:] = qpos_of(m, robot, np.asarray(q, dtype=np.float64))
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
+        R0, p0 = np.eye(3), np.zeros(3)
+        if base is not None:
+            R0, p0 = d.xmat[base].reshape(3, 3).copy(), d.xpos[base].copy()
         Ts = Ts_all[row][idx]
         reach = max(1.0, float(np.abs(Ts[:, :3, 3]).max()))
         for k, (kind, i, n) in enumerate(frames):
-            p = d.xpos[i] if kind == "body" else d.site_xpos[i]
-            R = (d.xmat[i] if kind == "body" else d.site_xmat[i]).reshape(3, 3)
+            p = R0.T @ ((d.xpos[i] if kind == "body" else d.site_xpos[i]) - p0)
+            R = R0.T @ (d.xmat[i] if kind == "body" else d.site_xmat[i]).reshape(3, 3)
             np.testing.assert_allclose(Ts[k, :3, 3], p, rtol=0, atol=tol * reach, err_msg=n)
             np.testing.assert_allclose(Ts[k, :3, :3], R, rtol=0, atol=tol, err_msg=n)
         for f, J in Js.items():
@@ -109,8 +114,8 @@ def check(m, robot: jk.Robot, qs: np.ndarray, *, jac_frames=None, tol: float = 1
             T = Ts_all[row][robot.frame_names.index(f)]
             body = i if kind == "body" else int(m.site_bodyid[i])
             jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
-            mujoco.mj_jac(m, d, jp, jr, T[:3, 3] + T[:3, :3] @ POINT, body)
-            want = np.vstack([jp, jr]) @ C
+            mujoco.mj_jac(m, d, jp, jr, p0 + R0 @ (T[:3, 3] + T[:3, :3] @ POINT), body)
+            want = np.vstack([R0.T @ jp, R0.T @ jr]) @ C
             np.testing.assert_allclose(J[row], want, rtol=0, atol=tol * reach, err_msg=f)
             moved = max(moved, float(np.abs(want).max()))
     assert moved > 0 or not jac_frames  # non-trivial Jacobians were compared

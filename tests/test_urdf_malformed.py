@@ -684,13 +684,15 @@ def test_max_bytes_must_be_a_positive_integer(bad):
 
 
 # ----------------------------------------------------------------------------------- sources
-def test_xacro_files_are_never_run(tmp_path):
+def test_xacro_files_are_never_run_by_the_parser(tmp_path):
+    """parse_urdf refuses a .xacro path; load_urdf expands it with xacro (tests/test_xacro.py)."""
     path = tmp_path / "arm.urdf.xacro"
     path.write_text(VALID)
     with pytest.raises(
         URDFError, match=r"never runs xacro.*xacro .*arm\.urdf\.xacro > robot\.urdf"
     ):
-        load_urdf(path)
+        parse_urdf(path)
+    assert load_urdf(path) == load_urdf(VALID)
 
 
 @pytest.mark.parametrize("source", [None, 3.5, ["<robot/>"], b""], ids=repr)
