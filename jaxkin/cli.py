@@ -538,7 +538,7 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
     """
     zoo = jk.robots.names()
     urdf = jk.robots.erd_names()
-    if spec not in zoo and spec not in urdf:
+    if spec not in zoo and spec not in urdf and spec not in jk.robots.mjcf_names():
         path = pathlib.Path(spec)
         if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or path.exists():
             return _movable(_load_urdf_file(path, dtype, tip, base), spec), path.stem

@@ -71,3 +71,11 @@ def test_unknown_and_missing():
         jk.robots.load("mjcf/fetchh")
     with pytest.raises(jk.JaxkinError, match="no parameter"):
         jk.robots.load("mjcf/fetch", scale=2)
+
+
+def test_cli_loads_mjcf_names(capsys):
+    from jaxkin.cli import main
+
+    assert main(["jacobian", "mjcf/reacher"]) == 0
+    out = capsys.readouterr().out
+    assert "mjcf/reacher (2 joints), frame finger" in out
