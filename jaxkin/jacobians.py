@@ -96,14 +96,15 @@ def _multipliers(robot: Robot, joints) -> dict:
     return {j: float(m[j]) for j in joints}
 
 
-ZERO_RUN = 16
+ZERO_COLUMNS = 16
 
 
 def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
     """(6, dof) array from per-column 3-vectors of scalars.
 
-    Runs of at least ``ZERO_RUN`` all-zero constant columns (joints off the frame's path in a
-    large tree) become one zeros block instead of one literal per entry."""
+    With at least ``ZERO_COLUMNS`` all-zero constant columns (joints off the frame's path in a
+    large tree) the other columns are scattered into a zeros block instead of stacking one
+    literal per entry (a concatenation of many pieces compiles slowly)."""
     dof = len(Jv)
 
     def block(cols):
@@ -111,27 +112,15 @@ def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
         rows += [[Jw[k][i] for k in cols] for i in range(3)]
         return fold.stack_matrix(rows, dtype)
 
-    zero = [all(fold.is_const(x) and x == 0.0 for x in (*Jv[k], *Jw[k])) for k in range(dof)]
-    pieces, start = [], 0
-    k = 0
-    while k < dof:
-        if not zero[k]:
-            k += 1
-            continue
-        end = k
-        while end < dof and zero[end]:
-            end += 1
-        if end - k >= ZERO_RUN:
-            if k > start:
-                pieces.append(block(range(start, k)))
-            pieces.append(jnp.zeros((6, end - k), dtype))
-            start = end
-        k = end
-    if not pieces:
+    nonzero = [
+        k for k in range(dof) if not all(fold.is_const(x) and x == 0.0 for x in (*Jv[k], *Jw[k]))
+    ]
+    if dof - len(nonzero) < ZERO_COLUMNS:
         return block(range(dof))
-    if start < dof:
-        pieces.append(block(range(start, dof)))
-    return jnp.concatenate(pieces, axis=1)
+    J = jnp.zeros((6, dof), dtype)
+    if not nonzero:
+        return J
+    return J.at[:, np.asarray(nonzero)].set(block(nonzero))
 
 
 def geometric_jacobian(
