@@ -21,9 +21,10 @@ What becomes what
   parent (a fixed joint); mocap bodies are fixed at their model pose.
 * ``hinge`` -> revolute, ``slide`` -> prismatic, with MuJoCo's axis and limits (``range`` where
   ``limited``; unbounded otherwise). A joint whose anchor (``pos``) is not the body origin, and
-  every joint of a body with several joints, gets a frame of its own at its anchor, named after
-  the joint (``joint:<name>`` when a body or site already has that name): MuJoCo applies a
-  body's joints one after the other in the body's frame, and so does the chain of frames.
+  every joint but the last of a body with several joints, gets a frame of its own at its anchor,
+  named after the joint (``joint:<name>`` when a body already has that name): MuJoCo applies a
+  body's joints one after the other in the body's (moving) frame, and so does the chain of
+  frames, ending at the body's frame.
 * Every site is a frame fixed to its body, named after it (``site:<name>`` when a body already
   has that name; an unnamed site ``site<id>``).
 * ``<equality joint1 joint2 polycoef>`` with a linear polynomial (``a2 = a3 = a4 = 0``), active
