@@ -1,6 +1,7 @@
 """The ``jaxkin`` command line.
 
-* ``jaxkin robots`` lists the zoo and the example-robot-data URDFs that load by name.
+* ``jaxkin robots`` lists the zoo, the example-robot-data URDFs and the MJCF models of installed
+  packages that load by name.
 * ``jaxkin jacobian ROBOT --q ...`` prints the geometric (or analytical) Jacobian of one
   configuration as a labelled table, stating its frame, reference and row order.
 * ``jaxkin velocities [ROBOT] --n N`` samples N configurations
@@ -288,8 +289,9 @@ def _add_robots_parser(sub: Any) -> None:
         help="list the robot zoo and the URDF robots that load by name",
         description=(
             "List the zoo (name and description), then the example-robot-data URDFs that load\n"
-            "by name (erd/..., when example-robot-data is installed). Any URDF file also works\n"
-            "as ROBOT: give its path."
+            "by name (erd/..., when example-robot-data is installed) and the MJCF models of\n"
+            "installed packages (mjcf/..., dm-control, gymnasium-robotics). Any URDF file also\n"
+            "works as ROBOT: give its path."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -525,6 +527,14 @@ def cmd_robots(args: argparse.Namespace) -> int:
             print(name)
     else:
         print("# URDF robots: install example-robot-data for more by name (erd/...)")
+    mjcf = jk.robots.mjcf_names()
+    print()
+    if mjcf:
+        print(f"# {len(mjcf)} MJCF robots of installed packages, loaded by name (e.g. {mjcf[0]}):")
+        for name in mjcf:
+            print(name)
+    else:
+        print("# MJCF robots: install dm-control or gymnasium-robotics for more by name (mjcf/...)")
     print("# any URDF file also works as ROBOT: give its path")
     return 0
 

@@ -167,8 +167,9 @@ def test_robots_and_help(capsys):
     assert code == 0
     zoo, _, rest = out.partition("\n\n")
     assert [line.split()[0] for line in zoo.splitlines()] == jk.robots.names()
-    erd = jk.robots.erd_names() if hasattr(jk.robots, "erd_names") else []
-    assert [line for line in rest.splitlines() if not line.startswith("#")] == erd
+    erd, mjcf = jk.robots.erd_names(), jk.robots.mjcf_names()
+    named = [line for line in rest.splitlines() if line and not line.startswith("#")]
+    assert named == erd + mjcf
     assert "URDF file" in rest
     code, out, _ = run(capsys, "velocities", "--help")
     assert code == 0 and "--singular-tol" in out and "sigma_min / sigma_max" in out
