@@ -10,6 +10,7 @@ Conventions: ``T_a_b`` is the pose of b in a; twists and Jacobian rows are ``[v;
 
 from . import analysis as analysis
 from . import calibration as calibration
+from . import compilation as compilation
 from . import derivatives as derivatives
 from . import ik as ik
 from . import inverse_velocity as inverse_velocity
