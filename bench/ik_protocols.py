@@ -101,8 +101,12 @@ def arms() -> dict[str, RobotSource]:
     out["iiwa14"] = RobotSource(
         "iiwa14", iiwa, r.frame_names[r.tip_frame], "tests/data/kuka_iiwa14.urdf"
     )
+    niryo = jk.robots.load("niryo_one")
     out["niryo one"] = RobotSource(
-        "niryo one", jk.to_urdf(jk.robots.load("niryo_one")), "tool", "jk.to_urdf(zoo niryo_one)"
+        "niryo one",
+        jk.to_urdf(niryo),
+        niryo.frame_names[niryo.tip_frame],
+        "jk.to_urdf(zoo niryo_one)",
     )
     return out
 
@@ -409,6 +413,8 @@ def tables(res: dict[str, Any]) -> str:
             "lrlrrrrl",
         )
     )
+    if not res.get("gpu"):
+        return "\n".join([*out, "", "cuRobo / PyRoki protocol: not run (the run was stopped)."])
     out += [
         "",
         f"**cuRobo / PyRoki protocol** (Franka Panda, {res['gpu'][0]['n']:,} targets, 16 seeds, "
@@ -453,11 +459,25 @@ def main(argv: list[str] | None = None) -> int:
         "--skip", nargs="*", default=[], help="peers: trac-ik robotics pinocchio pytorch_kinematics"
     )
     ap.add_argument("--write-md", action="store_true")
+    ap.add_argument("--from-json", type=Path, default=None, help="re-print a (partial) result")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     if args.quick:
         args.n, args.peer_targets, args.budget, args.gpu_n, args.repeats = 300, 50, 5.0, 200, 1
     args.skip = [s.lower() for s in args.skip]
+    if args.from_json is not None:
+        import json
+
+        res = json.loads(args.from_json.read_text())
+        res.setdefault("load_average_after", res["load_average_before"])
+        res.setdefault("wall_s", math.nan)
+        text = tables(res)
+        print(text)
+        if args.write_md:
+            replace_section(
+                HERE / "IK.md", text, "<!-- protocols:start -->", "<!-- protocols:end -->"
+            )
+        return 0
     jax.config.update("jax_enable_x64", True)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
@@ -478,15 +498,20 @@ def main(argv: list[str] | None = None) -> int:
     chosen = arms()
     if args.arms:
         chosen = {k: v for k, v in chosen.items() if k in args.arms.split(",")}
-    res["trac_ik"] = [
-        row for name, src in chosen.items() for row in trac_ik_protocol(name, src, args)
-    ]
-    res["gpu"] = gpu_protocol(args)
-    res["load_average_after"] = os.getloadavg()
-    res["wall_s"] = time.perf_counter() - t0
     out = args.out or RESULTS_DIR / (
         "ik_protocols_quick.json" if args.quick else "ik_protocols.json"
     )
+    res["trac_ik"] = []
+    for name, src in chosen.items():  # an arm that fails is reported; results saved per arm
+        try:
+            res["trac_ik"] += trac_ik_protocol(name, src, args)
+        except Exception as e:
+            log(f"{name}: {type(e).__name__}: {e}")
+            res["trac_ik"].append(dict(arm=name, dof=0, solver="jaxkin", error=str(e)[:300]))
+        write_json(out, res)
+    res["gpu"] = gpu_protocol(args)
+    res["load_average_after"] = os.getloadavg()
+    res["wall_s"] = time.perf_counter() - t0
     write_json(out, res)
     text = tables(res)
     print(text)
