@@ -31,21 +31,27 @@ Singular or unconverged solutions give finite damped values, never NaN. Check th
 derivative is only that of a best effort) and ``singular`` (``s_min^2 <= eps |J_f|_F^2`` among
 the free columns: the true derivative is unbounded there and the damped one is a choice).
 
-Calibration through IK (fit a tool offset so that IK solutions match measured joint angles)::
+Calibration through IK: fit a tool offset ``p`` so that the IK solutions of known poses ``Ts``
+(N, 4, 4) match the joint angles measured there, ``q_measured`` (N, dof); each solve starts at
+the measured angles (they pick the branch)::
 
     import optax
-    def loss(robot, Ts, q_measured, q0):
-        sol = jax.vmap(lambda T, q: jk.solve_ik(robot, T, q0, seeds=q[None], throw=False))(
-            Ts, q_measured)
+    def loss(robot, Ts, q_measured):
+        sol = jk.solve_ik(robot, Ts, q_measured, num_seeds=1, tol=1e-13, throw=False)
         return jnp.sum((sol.q - q_measured) ** 2)
-    grad = jax.jit(jax.grad(loss))          # the robot is traced: its leaves get gradients
-    opt = optax.adam(1e-3); state = opt.init(robot)
-    for _ in range(100):
-        g = grad(robot, Ts, q_measured, q0)
-        updates, state = opt.update(g, state)
-        robot = optax.apply_updates(robot, updates)   # all leaves move; mask to fit one
+    grad = jax.jit(jax.grad(loss))   # the robot is an argument: traced, its leaves get gradients
+    # L-BFGS directions, steps capped at 2 mm (no line search: one compiled gradient serves all)
+    opt = optax.chain(optax.scale_by_lbfgs(), optax.clip_by_global_norm(2e-3), optax.scale(-1.0))
+    p = robot.tool[:3, 3]
+    state = opt.init(p)
+    for _ in range(60):
+        robot = robot.replace(tool=robot.tool.at[:3, 3].set(p))
+        g = grad(robot, Ts, q_measured)              # a Robot of gradients; g.tool[:3, 3] for p
+        updates, state = opt.update(g.tool[:3, 3], state, p)
+        p = optax.apply_updates(p, updates)
 
-``tests/test_ik_implicit.py`` runs this loop on the tool offset alone and recovers the true one.
+``tests/test_ik_implicit.py`` runs this loop on a UR5 with 8 measured configurations and
+recovers a tool offset 3 cm away from the nominal one to 1e-6 m.
 """
 
 from __future__ import annotations
@@ -58,7 +64,7 @@ import jax.numpy as jnp
 from .jacobians import jacobian_pass
 from .pose_errors import pose_residual
 
-__all__ = ["full_rank", "solution_tangent"]
+__all__ = ["damped_pinv_apply", "full_rank", "solution_tangent"]
 
 
 def _pivots_positive(A: jax.Array) -> jax.Array:

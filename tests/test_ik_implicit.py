@@ -254,3 +254,117 @@ def test_trac_ik_protocol_small(solvers, name):
     regular = ~sol.singular
     res = np.einsum("nij,nj->ni", J, dq) - b
     assert np.max(np.abs(res[regular])) <= 1e-8 * max(1.0, np.max(np.abs(dq[regular])))
+
+
+# ----------------------------------------------------------------------------- robot parameters
+def _ur5_with_tool(offset) -> jk.Robot:
+    """The UR5's DH table (jaxkin.robots.industrial.ur5) with a tool T_flange_tool = Tz(offset)."""
+    rows = [
+        dict(a=0.0, alpha=np.pi / 2, d=0.089159, theta=0.0, joint="revolute"),
+        dict(a=-0.425, alpha=0.0, d=0.0, theta=0.0, joint="revolute"),
+        dict(a=-0.39225, alpha=0.0, d=0.0, theta=0.0, joint="revolute"),
+        dict(a=0.0, alpha=np.pi / 2, d=0.10915, theta=0.0, joint="revolute"),
+        dict(a=0.0, alpha=-np.pi / 2, d=0.09465, theta=0.0, joint="revolute"),
+        dict(a=0.0, alpha=0.0, d=0.0823, theta=0.0, joint="revolute"),
+    ]
+    for r in rows:
+        r.update(lower=-2 * np.pi, upper=2 * np.pi)
+    tool = np.eye(4)
+    tool[:3, 3] = offset
+    return jk.Robot.from_dh(rows, convention="standard", tool=tool)
+
+
+def _calibration_loss(robot, T, q_measured):
+    """Sum of squared differences between IK solutions (warm-started at the measured angles)
+    and the measured angles; robot traced: derivatives by the implicit function theorem."""
+    sol = jk.solve_ik(robot, T, q_measured, num_seeds=1, max_steps=100, tol=FD_TOL, throw=False)
+    return jnp.sum((sol.q - q_measured) ** 2), sol.converged
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    """A UR5 whose true tool offset is (0.01, -0.02, 0.12) m, 8 measured configurations, their
+    poses (what a tracker measures) and the compiled value-and-gradient over the robot."""
+    true = _ur5_with_tool([0.01, -0.02, 0.12])
+    rng = np.random.default_rng(5)
+    q_measured = rng.uniform(-2.5, 2.5, (8, 6))
+    q_measured[:, 1] = rng.uniform(-2.0, -1.0, 8)  # upper arm up: targets well within reach
+    q_measured[:, 2] = rng.uniform(0.5, 2.0, 8) * rng.choice([-1, 1], 8)  # away from the elbow
+    q_measured[:, 4] = rng.uniform(0.5, 2.5, 8) * rng.choice([-1, 1], 8)  # and wrist singularity
+    T = _poses(true, q_measured)
+    vg = jax.jit(jax.value_and_grad(_calibration_loss, has_aux=True))
+    return true, T, q_measured, vg
+
+
+def test_gradient_with_respect_to_the_robot_matches_finite_differences(calibration):
+    _, T, q_measured, vg = calibration
+    robot = _ur5_with_tool([0.0, 0.0, 0.1])
+    (value, conv), g = vg(robot, T, q_measured)
+    assert np.all(conv) and np.isfinite(value) and value > 0
+    assert isinstance(g, jk.Robot)  # jax.grad(loss)(robot): a robot of gradients
+    leaves = jax.tree_util.tree_leaves(g)
+    assert all(np.all(np.isfinite(x)) for x in leaves)
+
+    def central(change):  # Richardson-extrapolated central differences, h = 1e-5 and 2e-5
+        d = []
+        for h in (2 * H, H):
+            (vp, cp), _ = vg(change(h), T, q_measured)
+            (vm, cm), _ = vg(change(-h), T, q_measured)
+            assert np.all(cp) and np.all(cm)
+            d.append((vp - vm) / (2 * h))
+        return (4 * d[1] - d[0]) / 3
+
+    for k in range(3):  # the tool offset
+        fd = central(lambda h, k=k: robot.replace(tool=robot.tool.at[k, 3].add(h)))
+        assert abs(g.tool[k, 3] - fd) <= REL * abs(fd), (k, g.tool[k, 3], fd)
+    d = robot.params["d"]  # a DH parameter: d of joint 1
+    fd = central(lambda h: robot.replace(params={**robot.params, "d": d.at[0].add(h)}))
+    assert abs(g.params["d"][0] - fd) <= REL * abs(fd), (g.params["d"][0], fd)
+
+
+def test_calibration_through_ik_recovers_the_tool_offset(calibration):
+    """The example of jaxkin.ik_gradients: fit the tool offset from measured joint angles at
+    known poses, gradients through solve_ik, optax's L-BFGS directions (steps capped at 2 mm);
+    the true offset comes back to 1e-6 m and the loss to ~0."""
+    import optax
+
+    true, T, q_measured, vg = calibration
+    p = jnp.array([0.0, 0.0, 0.1])  # nominal offset, 3 cm from the true one
+    opt = optax.chain(optax.scale_by_lbfgs(), optax.clip_by_global_norm(2e-3), optax.scale(-1.0))
+    state = opt.init(p)
+    for _ in range(60):
+        robot = true.replace(tool=true.tool.at[:3, 3].set(p))
+        (value, conv), g = vg(robot, T, q_measured)
+        updates, state = opt.update(g.tool[:3, 3], state, p)
+        p = optax.apply_updates(p, updates)
+    assert np.all(conv), (p, value, conv)
+    np.testing.assert_allclose(p, true.tool[:3, 3], rtol=0, atol=1e-6)
+    assert value < 1e-10
+
+
+# ----------------------------------------------------------------------------- float32, jit, vmap
+def test_float32_jacrev_under_jit_and_vmap(solvers):
+    """``jit(vmap(jacrev(solve_ik(...).q)))`` on a float32 UR5: float32 derivatives, equal to the
+    float64 ones within what a float32 solution allows (residual <= 1e-5, the float32 default
+    tol: q is off by up to about 1e-5 / s_min, and dq by that times its own derivative)."""
+    solver = solvers("ur5")
+    r64 = solver.robot
+    r32 = jk.robots.load("ur5", dtype=np.float32)
+    q_star, T = _random_targets(r64, 11, 8)
+    J = _jacobians(r64, q_star)
+    s = np.linalg.svd(J, compute_uv=False)
+    keep = s[:, 0] / s[:, -1] <= 30.0
+    q_star, T = q_star[keep][:4], T[keep][:4]
+    n = len(T)
+    assert n >= 2
+    q0 = q_star + 0.05
+    jac = jax.jit(jax.vmap(jax.jacrev(lambda T, q0: jk.solve_ik(r32, T, q0, throw=False).q)))
+    D = jac(T.astype(np.float32), q0.astype(np.float32))  # (n, 6, 4, 4)
+    assert D.dtype == jnp.float32 and D.shape == (n, 6, 4, 4)
+    T_dot = T[:, None] @ GENERATORS[None]  # (n, 6 directions, 4, 4)
+    dq32 = np.einsum("nkab,ndab->ndk", np.asarray(D, np.float64), T_dot)
+    sol, dq64 = solver(np.repeat(T, 6, 0), np.repeat(q0, 6, 0), T_dot.reshape(-1, 4, 4))
+    dq64 = dq64.reshape(n, 6, 6)
+    assert np.all(sol.converged)
+    scale = np.max(np.abs(dq64))
+    np.testing.assert_allclose(dq32, dq64, rtol=0, atol=1e-3 * scale)

@@ -1,0 +1,122 @@
+"""Cost of differentiating ``jk.solve_ik`` (implicit function theorem) against the solve itself.
+
+For each arm: N random reachable targets (``jk.sample_configurations`` -> ``jk.fk``, fixed key),
+one start at the middle of the limits, default arguments, float64, all targets in one jitted
+call. Timed (steady state: median of repeats after a first call that compiles):
+
+* ``solve``: ``solve_ik(robot, T, q0).q``;
+* ``jvp``: ``jax.jvp`` of the same with one tangent ``T_dot`` per target (solve + dq);
+* ``grad``: ``jax.grad`` of ``sum(w * q)`` with respect to the targets (solve + the transposed
+  rule);
+* ``jacobian``: every target's full ``dq/dT`` (dof x 4 x 4): ``jax.jvp`` vmapped over the 16
+  unit tangents (the primal solve is not batched, so it runs once).
+
+The ratios are each row's time over ``solve`` (the issue's target: <= 2x). The derivative rule
+is the same whatever the solver did, so the ratio falls as targets get harder.
+
+Usage: ``python3 -m bench.ik_gradient [--n N] [--robots panda,ur5,niryo_one] [--repeats R]``;
+prints a markdown table with the machine and the load (``os.getloadavg``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxkin as jk
+
+from .report import first_and_repeats, log, machine_info, markdown_table, utc_now
+
+ROBOTS = {
+    "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
+    "ur5": lambda: jk.robots.load("ur5"),
+    "niryo_one": lambda: jk.robots.load("niryo_one"),
+}
+
+
+def _cases(robot: jk.Robot, n: int):
+    qs = jk.sample_configurations(robot, n, jax.random.key(1))
+    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
+    lo, hi = jk.sampling_bounds(robot)
+    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
+    X = jnp.zeros((n, 4, 4)).at[:, 0, 3].set(1.0).at[:, 1, 2].set(-1.0).at[:, 2, 1].set(1.0)
+    T_dot = T @ X  # move along x and turn about x in the target's own axes
+    w = jax.random.normal(jax.random.key(2), (n, robot.dof))
+    return T, q0, T_dot, w
+
+
+def measure(name: str, n: int, repeats: int) -> dict:
+    robot = ROBOTS[name]()
+    T, q0, T_dot, w = _cases(robot, n)
+
+    def q_of(T):
+        return jk.solve_ik(robot, T, q0, throw=False).q
+
+    solve = jax.jit(q_of)
+    jvp = jax.jit(lambda T, Td: jax.jvp(q_of, (T,), (Td,)))
+    grad = jax.jit(jax.grad(lambda T: jnp.sum(w * q_of(T))))
+    basis = jnp.eye(16, dtype=T.dtype).reshape(16, 1, 4, 4)  # d/dT_ab, the same for every target
+
+    @jax.jit
+    def jac(T):  # (16, N, dof): the solve runs once, the rule 16 times
+        return jax.vmap(lambda E: jax.jvp(q_of, (T,), (jnp.broadcast_to(E, T.shape),))[1])(basis)
+
+    rows = {}
+    for label, fn in (
+        ("solve", lambda: solve(T)),
+        ("jvp", lambda: jvp(T, T_dot)),
+        ("grad", lambda: grad(T)),
+        ("jacobian", lambda: jac(T)),
+    ):
+        log(f"{name}: {label}")
+        r = first_and_repeats(lambda fn=fn: jax.block_until_ready(fn()), repeats)
+        rows[label] = r
+        assert np.all(np.isfinite(np.asarray(jax.tree_util.tree_leaves(r["result"])[0])))
+    sol = jk.solve_ik(robot, T, q0, throw=False)
+    rows["converged"] = float(np.mean(np.asarray(sol.converged)))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--n", type=int, default=1000)
+    p.add_argument("--robots", default="panda,ur5,niryo_one")
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    load0 = os.getloadavg()
+    table = []
+    for name in args.robots.split(","):
+        r = measure(name, args.n, args.repeats)
+        base = r["solve"]["steady_s"]
+        for label in ("solve", "jvp", "grad", "jacobian"):
+            t = r[label]["steady_s"]
+            table.append(
+                [
+                    name,
+                    label,
+                    f"{r[label]['first_call_s']:.1f}",
+                    f"{t * 1e3:.1f}",
+                    f"{t / args.n * 1e6:.1f}",
+                    f"{t / base:.2f}x",
+                    f"{100 * r['converged']:.1f}%",
+                ]
+            )
+    load1 = os.getloadavg()
+    info = machine_info()
+    print(
+        f"jk.solve_ik derivatives, {args.n:,} targets per arm, float64, {utc_now()}; "
+        f"jax {info['jax']}, jaxkin {info['jaxkin']}; {info['cpu_model'][0]}, "
+        f"{info['cpus_usable']} usable cores; "
+        f"load average {load0[0]:.1f} before, {load1[0]:.1f} after\n"
+    )
+    header = ["robot", "what", "first call (s)", "steady (ms)", "per target (us)", "vs solve"]
+    print(markdown_table([*header, "converged"], table, align="llrrrrr"))
+
+
+if __name__ == "__main__":
+    main()
