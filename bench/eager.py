@@ -234,6 +234,7 @@ def measure_tree(n: int, repeats: int, path: Path) -> dict[str, Any]:
     log(f"tree: {n} joints built in {build_s:.2f} s; frame {frame} at depth {depth}")
     qs = np.random.default_rng(Q_SEED).uniform(-math.pi, math.pi, (repeats + 1, robot.dof))
     out: dict[str, Any] = dict(joints=n, frame=frame, depth=depth, build_s=build_s)
+    write_json(path, out)
     # The oracle: Pinocchio on the frame's ancestor chain alone (written by jk.to_urdf), which
     # is all its pose depends on (Pinocchio's data for the whole 10,000-joint tree does not fit
     # in memory: MemoryError in createData). Joints are matched by name.
@@ -433,7 +434,9 @@ def tables(res: dict[str, Any]) -> str:
             )
     parts += [
         "",
-        "**One frame of a large tree** (`bench.eager.random_tree`: built with "
+        "**One frame of a large tree**"
+        + (f" (measured {res['trees_date']}, a separate run)" if "trees_date" in res else "")
+        + " (`bench.eager.random_tree`: built with "
         "`jk.Robot.from_joints`, a fixed seed; its deepest frame; eager calls in a fresh process, "
         "first call included; checked against Pinocchio on `jk.to_urdf` of the frame's "
         "ancestor chain, other columns exactly 0):",
