@@ -366,6 +366,12 @@ def finite_difference_jacobian(
     ).astype(jnp.float64)
     f = robot.frame_index(frame)
     pt = None if point is None else jnp.asarray(point, dtype=jnp.float64)
+    return np.asarray(_fd_in(reference, *_fd_world_aligned(robot, q, f, pt, h)))
+
+
+def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
+    """``(Jv, Jw, p0, R0)``: finite-difference columns in base axes at the (offset) point, and the
+    pose at ``q`` (float64 robot and ``q``; traceable)."""
 
     def pose(qq):
         fp = forward_pass(robot, qq)
@@ -378,11 +384,16 @@ def finite_difference_jacobian(
     Jv = ((p_plus - p_minus) / (2 * h)).T
     Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus) / (2 * h)).T
     p0, R0 = pose(q)
+    return Jv, Jw, p0, R0
+
+
+def _fd_in(reference: str, Jv, Jw, p0, R0):
+    """The finite-difference Jacobian in ``reference`` from :func:`_fd_world_aligned`."""
     if reference == "local":
         Jv, Jw = R0.T @ Jv, R0.T @ Jw
     elif reference == "world":
         Jv = Jv + spatial.skew(p0) @ Jw
-    return np.asarray(jnp.concatenate([Jv, Jw], axis=0))
+    return jnp.concatenate([Jv, Jw], axis=0)
 
 
 def assert_jacobian_consistent(
@@ -399,23 +410,42 @@ def assert_jacobian_consistent(
 
     ``atol`` defaults to ``1e-12 * max(1, reach)`` in float64 and ``1e-5 * max(1, reach)`` in
     float32, reach being the largest distance of a frame from the base. Finite differences run
-    only in float64 (default: whenever x64 is on and the robot is float64).
+    only in float64 (default: whenever x64 is on and the robot is float64). Everything is
+    evaluated by one compiled program per call (one compile for a robot used once, as in a
+    property test over random robots).
     """
     fn = "jk.testing.assert_jacobian_consistent"
     q = check_q(robot, q, fn=fn, batch_hint=f"[{fn}(robot, q) for q in qs]")
     is64 = result_dtype(robot, q) == np.float64
-    Ts = forward_pass(robot, q)
-    reach = float(jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1)))
-    tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
     fd = finite_differences if finite_differences is not None else is64
+    if fd and not jax.config.read("jax_enable_x64"):
+        raise RuntimeError("finite differences need jax_enable_x64 (float64).")
+    f = robot.frame_index(frame)
+    robot64 = robot.astype(np.float64) if fd else None
+    pt64 = None if point is None or not fd else jnp.asarray(point, dtype=jnp.float64)
+
+    def values(q):
+        Ts = forward_pass(robot, q)
+        reach = jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1))
+        fd_parts = _fd_world_aligned(robot64, q.astype(jnp.float64), f, pt64, 1e-6) if fd else None
+        out = {}
+        for ref in references:
+            out[ref] = (
+                geometric_jacobian(robot, q, frame=frame, point=point, reference=ref),
+                jacobian_fwd(robot, q, frame=frame, point=point, reference=ref),
+                jacobian_rev(robot, q, frame=frame, point=point, reference=ref),
+                _fd_in(ref, *fd_parts) if fd else None,
+            )
+        return reach, out
+
+    reach, out = jax.device_get(jax.jit(values)(q))
+    reach = float(reach)
+    tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
     for ref in references:
-        J = np.asarray(geometric_jacobian(robot, q, frame=frame, point=point, reference=ref))
+        J, Jf, Jr, Jd = out[ref]
         assert np.all(np.isfinite(J)), f"non-finite Jacobian ({ref})"
-        Jf = np.asarray(jacobian_fwd(robot, q, frame=frame, point=point, reference=ref))
-        Jr = np.asarray(jacobian_rev(robot, q, frame=frame, point=point, reference=ref))
         np.testing.assert_allclose(J, Jf, rtol=0, atol=tol, err_msg=f"hand-built vs jacfwd ({ref})")
         np.testing.assert_allclose(J, Jr, rtol=0, atol=tol, err_msg=f"hand-built vs jacrev ({ref})")
         if fd:
-            Jd = finite_difference_jacobian(robot, q, frame=frame, point=point, reference=ref)
             scale = fd_atol * max(1.0, reach)
             np.testing.assert_allclose(J, Jd, rtol=0, atol=scale, err_msg=f"vs FD ({ref})")
