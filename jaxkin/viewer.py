@@ -1,0 +1,442 @@
+"""A 3-D robot viewer in the browser: meshes, frames, twist arrows, the velocity ellipsoid.
+
+An optional extra (``pip install 'jaxkin[viewer]'``: `viser <https://viser.studio>`_ for the
+web server and scene, ``trimesh`` and ``pycollada`` to read ``.stl``/``.obj``/``.dae`` meshes),
+imported on its own. Without it, :func:`show` raises :class:`ViewerDependencyError`, which names
+the install command. matplotlib (:mod:`jaxkin.viz`) stays the tool for static textbook figures::
+
+    import jaxkin as jk
+    import jaxkin.viewer as jview
+
+    robot = jk.robots.load("erd/panda")
+    view = jview.show(robot, q, qd)  # q, qd: (7,) joint positions and speeds
+    print(view.url)             # open it in a browser
+    view.update(q2, qd2)        # move the robot
+    view.animate(qs, fps=30)    # play a trajectory (blocks until done)
+    view.close()
+
+What is drawn, in world coordinates (the frame of ``robot.base``'s parent; ``jk.fk_all``), metres:
+
+* one scene node per frame of ``robot.frame_names``, named ``/robot/<frame>`` (``/`` in a frame
+  name becomes ``_``), with its x, y, z axes; its pose is ``fk_all(robot, q)[i]``;
+* meshes: for a robot loaded from a URDF file, each link's ``<visual>`` meshes
+  (``<mesh filename=... scale=...>``, with the visual's ``<origin>`` and ``<material>`` colour)
+  as children ``/robot/<frame>/visual_<k>``. ``package://pkg/rest`` is looked up in the
+  directories above the URDF file and in example-robot-data's ``share`` folder. A robot from
+  :func:`jaxkin.robots.load` (``"erd/..."``) finds its file by itself; otherwise pass ``urdf=``
+  (the path the robot was loaded from). ``<box>``, ``<cylinder>`` and ``<sphere>`` visuals are
+  drawn too. A robot without meshes (DH zoo robots; MJCF robots, whose meshes are not read) is
+  drawn as segments from each joint's parent frame origin to its child frame origin
+  (``/robot/links``);
+* with ``qd``, the twist of the default frame (``jk.twist``, ``world_aligned``: the frame
+  origin's velocity in world axes): ``/robot/twist_v`` (red, ``v`` in m/s) and
+  ``/robot/twist_omega`` (blue, ``omega`` in rad/s), both drawn from the frame origin,
+  ``arrow_scale`` metres per unit;
+* the translational velocity ellipsoid of the default frame (``jk.velocity_ellipsoid`` of the
+  geometric Jacobian): ``/robot/ellipsoid``, radii in m/s per unit joint speed times
+  ``ellipsoid_scale``.
+
+Twist and ellipsoid are drawn for ``frame=`` or, when it is ``None``, for the robot's default
+frame; a robot without one (branching trees) shows neither until ``frame=`` is given.
+
+Example (starts a server, so not run as a doctest)::
+
+    >>> import jaxkin as jk, jaxkin.viewer as jview
+    >>> robot = jk.robots.load("puma560")
+    >>> view = jview.show(robot, [0.0, 0.5, -0.5, 0.0, 0.3, 0.0])  # doctest: +SKIP
+    >>> view.url  # doctest: +SKIP
+    'http://127.0.0.1:...'
+    >>> view.close()  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from ._checks import check_q
+from .analysis import velocity_ellipsoid
+from .errors import JaxkinError
+from .jacobians import geometric_jacobian
+from .kinematics import fk_all
+from .model import Robot
+from .velocity import twist
+
+__all__ = ["View", "ViewerDependencyError", "ViewerError", "Visual", "show", "urdf_visuals"]
+
+_INSTALL = "pip install 'jaxkin[viewer]'"
+_GREY = (170, 170, 180)
+_LINK_COLOR = (74, 85, 104)
+_V_COLOR = (197, 48, 48)
+_W_COLOR = (43, 108, 176)
+_ELLIPSOID_COLOR = (221, 107, 32)
+
+
+class ViewerDependencyError(JaxkinError, ImportError):
+    """viser or trimesh (the ``viewer`` extra) is not installed."""
+
+
+class ViewerError(JaxkinError):
+    """A viewer input jaxkin cannot show (a URDF file that is missing, a trajectory's shape)."""
+
+
+def _viser():
+    try:
+        import trimesh
+        import viser
+        import viser.transforms
+    except ImportError as e:
+        raise ViewerDependencyError(
+            f"jaxkin.viewer needs viser and trimesh ({e}); install them with: {_INSTALL}"
+        ) from e
+    return viser, trimesh
+
+
+@dataclass(frozen=True)
+class Visual:
+    """One ``<visual>`` of a URDF link.
+
+    ``kind``: ``"mesh"`` (``path``, ``scale``), ``"box"`` (``size``), ``"cylinder"``
+    (``radius``, ``length``) or ``"sphere"`` (``radius``); ``xyz``/``rpy``: its origin in the
+    link frame; ``rgba``: the ``<material><color>`` (0..1) or ``None``.
+    """
+
+    link: str
+    kind: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    path: Path | None = None
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    length: float = 0.0
+    rgba: tuple[float, float, float, float] | None = None
+
+
+def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
+    if not text:
+        return default
+    return tuple(float(v) for v in text.split())
+
+
+def _package_roots(urdf: Path) -> list[Path]:
+    roots = list(urdf.parent.resolve().parents)
+    roots.insert(0, urdf.parent.resolve())
+    try:
+        from .robots import example_robot_data
+
+        roots.append(Path(example_robot_data.robots_dir()).parent.parent)
+    except Exception:  # not installed: the URDF's own directories only
+        pass
+    return roots
+
+
+def _resolve(filename: str, urdf: Path, roots: list[Path]) -> Path:
+    if filename.startswith("file://"):
+        filename = filename[len("file://") :]
+    if filename.startswith("package://"):
+        rest = filename[len("package://") :]
+        package, _, inner = rest.partition("/")
+        candidates = []
+        for root in roots:
+            candidates += [root / rest, root / inner]
+            if root.name == package:
+                candidates.append(root / inner)
+    else:
+        p = Path(filename)
+        candidates = [p] if p.is_absolute() else [urdf.parent / p]
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise ViewerError(
+        f"{urdf}: mesh {filename!r} not found (looked in {[str(c) for c in candidates[:6]]}"
+        f"{' ...' if len(candidates) > 6 else ''}); install the package that ships it or "
+        "pass meshes=False to draw link segments instead."
+    )
+
+
+def urdf_visuals(urdf: str | os.PathLike) -> list[Visual]:
+    """The ``<visual>`` elements of a URDF file's links, mesh paths resolved (module doc).
+
+    >>> import jaxkin.viewer as jview, jaxkin.robots.example_robot_data as erd
+    >>> vs = jview.urdf_visuals(erd.path("erd/panda"))  # doctest: +SKIP
+    >>> vs[0].link, vs[0].kind, vs[0].path.name  # doctest: +SKIP
+    ('panda_link0', 'mesh', 'link0.dae')
+    """
+    path = Path(urdf)
+    if not path.is_file():
+        raise ViewerError(
+            f"URDF file {str(path)!r} not found; pass the path the robot was loaded from."
+        )
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise ViewerError(f"{path}: not readable XML ({e}).") from e
+    colors = {
+        m.get("name"): _floats(m.find("color").get("rgba"), (0.7, 0.7, 0.7, 1.0))
+        for m in root.findall("material")
+        if m.find("color") is not None
+    }
+    roots = _package_roots(path)
+    out = []
+    for link in root.findall("link"):
+        for vis in link.findall("visual"):
+            geom = vis.find("geometry")
+            if geom is None or len(geom) == 0:
+                continue
+            origin = vis.find("origin")
+            xyz = _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0))
+            rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
+            rgba = None
+            mat = vis.find("material")
+            if mat is not None:
+                color = mat.find("color")
+                rgba = _floats(color.get("rgba"), None) if color is not None else None
+                rgba = rgba or colors.get(mat.get("name"))
+            shape = geom[0]
+            common = dict(link=link.get("name"), xyz=xyz, rpy=rpy, rgba=rgba)
+            if shape.tag == "mesh":
+                p = _resolve(shape.get("filename", ""), path, roots)
+                scale = _floats(shape.get("scale"), (1.0, 1.0, 1.0))
+                out.append(Visual(kind="mesh", path=p, scale=scale, **common))
+            elif shape.tag == "box":
+                out.append(Visual(kind="box", size=_floats(shape.get("size"), (0, 0, 0)), **common))
+            elif shape.tag == "cylinder":
+                r, h = float(shape.get("radius", 0)), float(shape.get("length", 0))
+                out.append(Visual(kind="cylinder", radius=r, length=h, **common))
+            elif shape.tag == "sphere":
+                out.append(Visual(kind="sphere", radius=float(shape.get("radius", 0)), **common))
+    return out
+
+
+def _urdf_path(robot: Robot, urdf: Any) -> Path | None:
+    if urdf is not None:
+        return Path(urdf)
+    if robot.name.startswith("erd/"):
+        from .robots import example_robot_data
+
+        try:
+            return Path(example_robot_data.path(robot.name))
+        except JaxkinError:
+            return None
+    return None
+
+
+def _trimesh(visual: Visual, trimesh: Any) -> Any:
+    if visual.kind == "mesh":
+        try:
+            mesh = trimesh.load(str(visual.path), force="mesh")
+        except Exception as e:
+            raise ViewerError(
+                f"mesh {str(visual.path)!r} of link {visual.link!r} could not be read ({e}); "
+                f"{_INSTALL} installs the readers for .stl, .obj and .dae."
+            ) from e
+        mesh.apply_scale(visual.scale)
+    elif visual.kind == "box":
+        mesh = trimesh.creation.box(extents=visual.size)
+    elif visual.kind == "cylinder":
+        mesh = trimesh.creation.cylinder(radius=visual.radius, height=visual.length)
+    else:
+        mesh = trimesh.creation.icosphere(radius=visual.radius)
+    if visual.rgba is not None or visual.kind != "mesh" or mesh.visual.kind is None:
+        rgba = np.array(visual.rgba if visual.rgba is not None else (*np.array(_GREY) / 255, 1))
+        mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=(rgba * 255).astype(np.uint8))
+    return mesh
+
+
+def _node(frame: str) -> str:
+    return "/robot/" + frame.replace("/", "_")
+
+
+class View:
+    """A running viewer (made by :func:`show`): ``url``, ``update``, ``animate``, ``close``.
+
+    ``server`` is the ``viser.ViserServer``; ``nodes`` maps each frame name to its scene node
+    name; ``mesh_nodes`` lists the mesh nodes.
+    """
+
+    def __init__(self, robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf):
+        viser, trimesh = _viser()
+        self.robot = robot
+        self.server = server
+        self._so3 = viser.transforms.SO3
+        self._frame = frame
+        self._arrow_scale = float(arrow_scale)
+        self._ellipsoid_scale = float(ellipsoid_scale)
+        self._closed = False
+        scene = server.scene
+        self.nodes = {name: _node(name) for name in robot.frame_names}
+        self._frames = [
+            scene.add_frame(self.nodes[n], axes_length=0.08, axes_radius=0.004, origin_radius=0.008)
+            for n in robot.frame_names
+        ]
+        self.mesh_nodes: list[str] = []
+        path = _urdf_path(robot, urdf) if meshes else None
+        if path is not None:
+            counts: dict[str, int] = {}
+            for vis in urdf_visuals(path):
+                if vis.link not in self.nodes:
+                    continue  # a link of the file that this robot's chain left out
+                k = counts.get(vis.link, 0)
+                counts[vis.link] = k + 1
+                name = f"{self.nodes[vis.link]}/visual_{k}"
+                scene.add_mesh_trimesh(
+                    name,
+                    _trimesh(vis, trimesh),
+                    position=np.array(vis.xyz, float),
+                    wxyz=self._so3.from_rpy_radians(*vis.rpy).wxyz,
+                )
+                self.mesh_nodes.append(name)
+        self._links = None
+        if not self.mesh_nodes:
+            self._segments = [(p, j + 1) for j, p in enumerate(robot.parents)]
+            if robot.has_tool:
+                self._segments.append((len(robot.parents), robot.n_frames - 1))
+        self._has_target = frame is not None or robot.has_default_frame
+        self._ellipsoid = None
+        if self._has_target:
+            self._ellipsoid = scene.add_icosphere(
+                "/robot/ellipsoid", 1.0, _ELLIPSOID_COLOR, subdivisions=3, opacity=0.35
+            )
+        self._kernel = jax.jit(self._state)
+
+    @property
+    def url(self) -> str:
+        """``http://host:port`` of the page."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def _state(self, q, qd):
+        Ts = fk_all(self.robot, q)
+        if not self._has_target:
+            return Ts, None, None, None
+        i = self.robot.frame_index(self._frame)
+        J = geometric_jacobian(self.robot, q, frame=i)
+        e = velocity_ellipsoid(J)
+        V = twist(self.robot, q, qd, frame=i)
+        return Ts, V, e.radii, e.axes
+
+    def update(self, q: Any, qd: Any = None) -> None:
+        """Move the robot to ``q`` (dof,) and draw the twist for ``qd`` (dof,) if given."""
+        self._check_open()
+        q = check_q(self.robot, q, fn="jaxkin.viewer.View.update")
+        has_qd = qd is not None
+        qd = check_q(self.robot, qd if has_qd else np.zeros(self.robot.dof), "qd", "update")
+        Ts, V, radii, axes = jax.device_get(self._kernel(q, qd))
+        Ts = np.asarray(Ts, float)
+        wxyz = self._so3.from_matrix(Ts[:, :3, :3]).wxyz
+        scene = self.server.scene
+        with self.server.atomic():
+            for handle, T, quat in zip(self._frames, Ts, wxyz, strict=True):
+                handle.position = T[:3, 3]
+                handle.wxyz = quat
+            if not self.mesh_nodes:
+                points = np.array([[Ts[a, :3, 3], Ts[b, :3, 3]] for a, b in self._segments])
+                scene.add_line_segments("/robot/links", points, _LINK_COLOR, thickness=0.01)
+            if not self._has_target:
+                return
+            i = self.robot.frame_index(self._frame)
+            o = Ts[i, :3, 3]
+            axes = np.asarray(axes, float)
+            if np.linalg.det(axes) < 0:
+                axes = axes * np.array([1.0, 1.0, -1.0])
+            self._ellipsoid.position = o
+            self._ellipsoid.wxyz = self._so3.from_matrix(axes).wxyz
+            self._ellipsoid.scale = tuple(np.maximum(radii * self._ellipsoid_scale, 1e-6))
+            if has_qd:
+                V = np.asarray(V, float) * self._arrow_scale
+                for name, vec, color in (
+                    ("/robot/twist_v", V[:3], _V_COLOR),
+                    ("/robot/twist_omega", V[3:], _W_COLOR),
+                ):
+                    scene.add_arrows(
+                        name,
+                        np.array([[o, o + vec]]),
+                        color,
+                        shaft_radius=0.006,
+                        head_radius=0.015,
+                        head_length=0.03,
+                    )
+
+    def animate(self, qs: Any, fps: float = 30.0, qds: Any = None, loops: int = 1) -> None:
+        """Play the trajectory ``qs`` (T, dof) (and ``qds`` (T, dof)) at ``fps``; blocks."""
+        qs = np.asarray(qs, float)
+        if qs.ndim != 2 or qs.shape[1] != self.robot.dof:
+            raise ViewerError(
+                f"animate needs qs of shape (T, {self.robot.dof}), got {qs.shape}; "
+                "stack the configurations with np.stack(qs)."
+            )
+        if qds is not None and np.shape(qds) != qs.shape:
+            raise ViewerError(f"qds must have the shape of qs {qs.shape}, got {np.shape(qds)}.")
+        if not fps > 0:
+            raise ViewerError(f"fps must be positive, got {fps}.")
+        for _ in range(loops):
+            for k, q in enumerate(qs):
+                start = time.perf_counter()
+                self.update(q, None if qds is None else qds[k])
+                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - start)))
+
+    def close(self) -> None:
+        """Stop the server (idempotent)."""
+        if not self._closed:
+            self._closed = True
+            self.server.stop()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ViewerError("this viewer was closed; call jaxkin.viewer.show again.")
+
+    def __enter__(self) -> View:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _free_port(host: str) -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def show(
+    robot: Robot,
+    q: Any,
+    qd: Any = None,
+    *,
+    port: int | None = None,
+    host: str = "127.0.0.1",
+    frame: int | str | None = None,
+    urdf: str | os.PathLike | None = None,
+    meshes: bool = True,
+    arrow_scale: float = 0.2,
+    ellipsoid_scale: float = 0.3,
+) -> View:
+    """Serve a 3-D view of ``robot`` at ``q`` (and the twist for ``qd``) on ``http://host:port``.
+
+    ``port=None`` picks a free port; ``host`` defaults to loopback (``"0.0.0.0"`` serves other
+    machines). ``frame``: where twist and ellipsoid are drawn (default: the robot's default
+    frame). ``urdf``: the file the robot was loaded from, for its meshes (found by itself for
+    ``jk.robots.load("erd/...")``); ``meshes=False`` draws link segments instead. Returns a
+    :class:`View`; see the module doc for what is drawn and the example.
+    """
+    viser, _ = _viser()
+    if not isinstance(robot, Robot):
+        raise ViewerError(f"show needs a jaxkin Robot, got {type(robot).__name__}.")
+    if port is None:
+        port = _free_port(host)
+    server = viser.ViserServer(host=host, port=int(port), verbose=False)
+    try:
+        view = View(robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf)
+        view.update(q, qd)
+    except BaseException:
+        server.stop()
+        raise
+    return view

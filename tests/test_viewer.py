@@ -1,0 +1,151 @@
+"""jaxkin.viewer: the scene holds one node per frame at its fk_all pose, the URDF's meshes, the
+twist arrows and the velocity ellipsoid; the page is served and headless Chromium connects to it
+and mounts the 3-D view (its camera reaches the server)."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import urllib.request
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+import jaxkin as jk
+
+viser = pytest.importorskip("viser", reason="the viewer extra: pip install 'jaxkin[viewer]'")
+import jaxkin.viewer as jview  # noqa: E402
+
+Q = np.array([0.1, -0.4, 0.2, -1.9, 0.3, 1.6, 0.5])
+QD = np.array([0.3, -0.2, 0.1, 0.4, -0.5, 0.2, 0.6])
+TOL = 1e-6
+
+
+def _check_poses(view, robot, q):
+    """Every frame node sits at its fk_all pose (position and rotation)."""
+    Ts = np.asarray(jk.fk_all(robot, q))
+    for i, name in enumerate(robot.frame_names):
+        handle = view.server.scene.get_handle_by_name(view.nodes[name])
+        assert handle is not None, name
+        np.testing.assert_allclose(handle.position, Ts[i, :3, 3], atol=TOL)
+        R = viser.transforms.SO3(np.asarray(handle.wxyz)).as_matrix()
+        np.testing.assert_allclose(R, Ts[i, :3, :3], atol=TOL)
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def test_panda_meshes_frames_twist_ellipsoid_in_headless_chromium(tmp_path):
+    if not jk.robots.erd_names():
+        pytest.skip("example-robot-data is not installed (pip install example-robot-data)")
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no chromium binary (Debian: apt-get install chromium)")
+    robot = jk.robots.load("erd/panda")
+    # The links of the file that carry a <visual><mesh>, read independently of the viewer.
+    root = ET.parse(jk.robots.example_robot_data.path("erd/panda")).getroot()
+    with_mesh = {
+        link.get("name")
+        for link in root.findall("link")
+        if link.find("visual/geometry/mesh") is not None
+    }
+    expected_meshes = {f"/robot/{n}/visual_0" for n in with_mesh & set(robot.frame_names)}
+    assert len(expected_meshes) >= 8  # link0..link7 and the hand
+
+    with jview.show(robot, Q, QD) as view:
+        assert view.url.startswith("http://127.0.0.1:")
+        assert list(view.nodes) == list(robot.frame_names)
+        assert set(view.mesh_nodes) == expected_meshes
+        scene = view.server.scene
+        for node in view.mesh_nodes:
+            assert scene.get_handle_by_name(node) is not None, node
+        assert scene.get_handle_by_name("/robot/links") is None  # meshes replace segments
+        _check_poses(view, robot, Q)
+
+        # Twist arrows and ellipsoid at the default frame (panda_hand_tcp).
+        i = robot.frame_index(None)
+        o = np.asarray(jk.fk_all(robot, Q))[i, :3, 3]
+        ell = jk.velocity_ellipsoid(jk.geometric_jacobian(robot, Q))
+        handle = scene.get_handle_by_name("/robot/ellipsoid")
+        np.testing.assert_allclose(handle.position, o, atol=TOL)
+        np.testing.assert_allclose(handle.scale, np.asarray(ell.radii) * 0.3, rtol=1e-6)
+        for node in ("/robot/twist_v", "/robot/twist_omega"):
+            assert scene.get_handle_by_name(node) is not None, node
+
+        # update() and animate() move every frame.
+        view.update(-Q, QD)
+        _check_poses(view, robot, -Q)
+        view.animate(np.stack([Q, 0.5 * Q, -0.5 * Q]), fps=200)
+        _check_poses(view, robot, -0.5 * Q)
+
+        with urllib.request.urlopen(view.url, timeout=10) as page:
+            assert page.status == 200
+            assert b"<html" in page.read().lower()
+
+        # A headless browser loads the page, opens the websocket and mounts the 3-D canvas:
+        # the client's first camera message reaches the server.
+        mounted = threading.Event()
+        view.server.on_client_connect(
+            lambda client: client.camera.on_update(lambda _: mounted.set())
+        )
+        cmd = [
+            browser,
+            "--headless",
+            "--disable-gpu",
+            "--no-sandbox",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=480,360",
+            "--virtual-time-budget=30000",
+            view.url,
+        ]
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+        )
+        try:
+            assert mounted.wait(60), "headless chromium did not mount the viewer within 60 s"
+            assert len(view.server.get_clients()) >= 1
+        finally:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(20)
+    with pytest.raises(jview.ViewerError, match="closed"):
+        view.update(Q)
+
+
+def test_dh_robot_without_meshes_draws_link_segments():
+    robot = jk.robots.load("puma560")
+    q = np.array([0.2, -0.5, 0.4, 0.1, 0.6, -0.3])
+    with jview.show(robot, q) as view:
+        assert list(view.nodes) == list(robot.frame_names)
+        assert view.mesh_nodes == []
+        scene = view.server.scene
+        assert scene.get_handle_by_name("/robot/links") is not None
+        assert scene.get_handle_by_name("/robot/twist_v") is None  # no qd, no twist
+        _check_poses(view, robot, q)
+        with pytest.raises(jview.ViewerError, match=r"shape \(T, 6\)"):
+            view.animate(q)
+        with pytest.raises(jk.JaxkinError):
+            view.update(q[:3])
+
+
+def test_without_the_extra_the_error_names_the_install_command(monkeypatch):
+    monkeypatch.setitem(sys.modules, "viser", None)
+    with pytest.raises(jview.ViewerDependencyError, match=r"pip install 'jaxkin\[viewer\]'"):
+        jview.show(jk.robots.load("puma560"), np.zeros(6))
+    assert issubclass(jview.ViewerDependencyError, ImportError)
+
+
+def test_missing_urdf_is_a_clear_error(tmp_path):
+    with pytest.raises(jview.ViewerError, match="not found"):
+        jview.urdf_visuals(tmp_path / "nope.urdf")
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(
+        '<robot name="r"><link name="a"><visual><geometry>'
+        '<mesh filename="package://nowhere/meshes/a.stl"/></geometry></visual></link></robot>'
+    )
+    with pytest.raises(jview.ViewerError, match=r"a\.stl"):
+        jview.urdf_visuals(urdf)
