@@ -15,7 +15,7 @@ the install command. matplotlib (:mod:`jaxkin.viz`) stays the tool for static te
     view.animate(qs, fps=30)    # play a trajectory (blocks until done)
     view.close()
 
-What is drawn, in world coordinates (the frame of ``robot.base``'s parent; ``jk.fk_all``), metres:
+What is drawn, in world coordinates (those of ``jk.fk_all``; ``robot.base`` is T_world_base), in m:
 
 * one scene node per frame of ``robot.frame_names``, named ``/robot/<frame>`` (``/`` in a frame
   name becomes ``_``), with its x, y, z axes; its pose is ``fk_all(robot, q)[i]``;
@@ -180,40 +180,57 @@ def urdf_visuals(urdf: str | os.PathLike) -> list[Visual]:
         root = ET.parse(path).getroot()
     except ET.ParseError as e:
         raise ViewerError(f"{path}: not readable XML ({e}).") from e
-    colors = {
-        m.get("name"): _floats(m.find("color").get("rgba"), (0.7, 0.7, 0.7, 1.0))
-        for m in root.findall("material")
-        if m.find("color") is not None
-    }
+    try:
+        colors = {
+            m.get("name"): _floats(m.find("color").get("rgba"), (0.7, 0.7, 0.7, 1.0))
+            for m in root.findall("material")
+            if m.find("color") is not None
+        }
+    except ValueError as e:
+        raise ViewerError(f"{path}: a <material> color is not 4 numbers ({e}).") from e
     roots = _package_roots(path)
-    out = []
+    out: list[Visual] = []
     for link in root.findall("link"):
-        for vis in link.findall("visual"):
-            geom = vis.find("geometry")
-            if geom is None or len(geom) == 0:
-                continue
-            origin = vis.find("origin")
-            xyz = _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0))
-            rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
-            rgba = None
-            mat = vis.find("material")
-            if mat is not None:
-                color = mat.find("color")
-                rgba = _floats(color.get("rgba"), None) if color is not None else None
-                rgba = rgba or colors.get(mat.get("name"))
-            shape = geom[0]
-            common = dict(link=link.get("name"), xyz=xyz, rpy=rpy, rgba=rgba)
-            if shape.tag == "mesh":
-                p = _resolve(shape.get("filename", ""), path, roots)
-                scale = _floats(shape.get("scale"), (1.0, 1.0, 1.0))
-                out.append(Visual(kind="mesh", path=p, scale=scale, **common))
-            elif shape.tag == "box":
-                out.append(Visual(kind="box", size=_floats(shape.get("size"), (0, 0, 0)), **common))
-            elif shape.tag == "cylinder":
-                r, h = float(shape.get("radius", 0)), float(shape.get("length", 0))
-                out.append(Visual(kind="cylinder", radius=r, length=h, **common))
-            elif shape.tag == "sphere":
-                out.append(Visual(kind="sphere", radius=float(shape.get("radius", 0)), **common))
+        try:
+            out += _link_visuals(link, path, roots, colors)
+        except ValueError as e:
+            if isinstance(e, JaxkinError):
+                raise
+            raise ViewerError(
+                f"{path}: a <visual> of link {link.get('name')!r} has a value that is not a "
+                f"number ({e}); fix the file or pass meshes=False to jaxkin.viewer.show."
+            ) from e
+    return out
+
+
+def _link_visuals(link: Any, path: Path, roots: list[Path], colors: dict) -> list[Visual]:
+    out = []
+    for vis in link.findall("visual"):
+        geom = vis.find("geometry")
+        if geom is None or len(geom) == 0:
+            continue
+        origin = vis.find("origin")
+        xyz = _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0))
+        rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
+        rgba = None
+        mat = vis.find("material")
+        if mat is not None:
+            color = mat.find("color")
+            rgba = _floats(color.get("rgba"), None) if color is not None else None
+            rgba = rgba or colors.get(mat.get("name"))
+        shape = geom[0]
+        common = dict(link=link.get("name"), xyz=xyz, rpy=rpy, rgba=rgba)
+        if shape.tag == "mesh":
+            p = _resolve(shape.get("filename", ""), path, roots)
+            scale = _floats(shape.get("scale"), (1.0, 1.0, 1.0))
+            out.append(Visual(kind="mesh", path=p, scale=scale, **common))
+        elif shape.tag == "box":
+            out.append(Visual(kind="box", size=_floats(shape.get("size"), (0, 0, 0)), **common))
+        elif shape.tag == "cylinder":
+            r, h = float(shape.get("radius", 0)), float(shape.get("length", 0))
+            out.append(Visual(kind="cylinder", radius=r, length=h, **common))
+        elif shape.tag == "sphere":
+            out.append(Visual(kind="sphere", radius=float(shape.get("radius", 0)), **common))
     return out
 
 
@@ -328,7 +345,12 @@ class View:
         self._check_open()
         q = check_q(self.robot, q, fn="jaxkin.viewer.View.update")
         has_qd = qd is not None
-        qd = check_q(self.robot, qd if has_qd else np.zeros(self.robot.dof), "qd", "update")
+        qd = check_q(
+            self.robot,
+            qd if has_qd else np.zeros(self.robot.dof),
+            "qd",
+            "jaxkin.viewer.View.update",
+        )
         Ts, V, radii, axes = jax.device_get(self._kernel(q, qd))
         Ts = np.asarray(Ts, float)
         wxyz = self._so3.from_matrix(Ts[:, :3, :3]).wxyz

@@ -149,3 +149,9 @@ def test_missing_urdf_is_a_clear_error(tmp_path):
     )
     with pytest.raises(jview.ViewerError, match=r"a\.stl"):
         jview.urdf_visuals(urdf)
+    urdf.write_text(
+        '<robot name="r"><link name="a"><visual><geometry>'
+        '<sphere radius="big"/></geometry></visual></link></robot>'
+    )
+    with pytest.raises(jview.ViewerError, match=r"link 'a'.*not a number"):
+        jview.urdf_visuals(urdf)
