@@ -312,7 +312,6 @@ class View:
                     wxyz=self._so3.from_rpy_radians(*vis.rpy).wxyz,
                 )
                 self.mesh_nodes.append(name)
-        self._links = None
         if not self.mesh_nodes:
             self._segments = [(p, j + 1) for j, p in enumerate(robot.parents)]
             if robot.has_tool:
