@@ -25,9 +25,18 @@ What is drawn, in world coordinates (those of ``jk.fk_all``; ``robot.base`` is T
   directories above the URDF file and in example-robot-data's ``share`` folder. A robot from
   :func:`jaxkin.robots.load` (``"erd/..."``) finds its file by itself; otherwise pass ``urdf=``
   (the path the robot was loaded from). ``<box>``, ``<cylinder>`` and ``<sphere>`` visuals are
-  drawn too. A robot without meshes (DH zoo robots; MJCF robots, whose meshes are not read) is
-  drawn as segments from each joint's parent frame origin to its child frame origin
-  (``/robot/links``);
+  drawn too. For a robot loaded from an MJCF file (:func:`jaxkin.load_mjcf`), MuJoCo compiles
+  the file *with* its mesh files and each visual geom of a body of ``robot.frame_names`` is
+  drawn as ``/robot/<body>/visual_<k>`` (k: the geom's order in its body) at the geom's
+  ``geom_pos``/``geom_quat`` in the body frame, coloured by its material (else ``geom_rgba``):
+  meshes (``mesh_vert``/``mesh_face``, in the mesh frame MuJoCo re-centred), boxes, spheres,
+  ellipsoids, capsules and cylinders. Collision-only geoms are skipped by MuJoCo's conventions:
+  ``geom_group`` >= 3 (groups MuJoCo's viewer hides) or alpha 0; planes and height fields are
+  not drawn. A robot from ``jk.robots.load("mjcf/...")`` finds its file by itself; otherwise
+  pass ``mjcf=``. Missing mesh files (urdf or mjcf) raise :class:`ViewerError`, which names the
+  file; ``meshes=False`` draws segments instead. A robot without meshes (DH zoo robots, a robot
+  loaded from an XML string) is drawn as segments from each joint's parent frame origin to its
+  child frame origin (``/robot/links``);
 * with ``qd``, the twist of the default frame (``jk.twist``, ``world_aligned``: the frame
   origin's velocity in world axes): ``/robot/twist_v`` (red, ``v`` in m/s) and
   ``/robot/twist_omega`` (blue, ``omega`` in rad/s), both drawn from the frame origin,
@@ -234,6 +243,86 @@ def _link_visuals(link: Any, path: Path, roots: list[Path], colors: dict) -> lis
     return out
 
 
+_MJCF_VISIBLE_GROUPS = 3  # groups 0, 1, 2: those MuJoCo's own viewer shows by default
+
+
+def _mjcf_geoms(path: Path, trimesh: Any) -> list[tuple[str, Any, np.ndarray, np.ndarray]]:
+    """``(body name, trimesh, geom_pos, geom_quat)`` of each visual geom of an MJCF file,
+    compiled by MuJoCo with its mesh files (module doc: which geoms are drawn)."""
+    try:
+        import mujoco
+    except ImportError as e:
+        raise ViewerDependencyError(
+            f"MJCF meshes need MuJoCo ({e}); install it with: pip install 'jaxkin[mjcf]', or "
+            "pass meshes=False to draw link segments instead."
+        ) from e
+    if not path.is_file():
+        raise ViewerError(
+            f"MJCF file {str(path)!r} not found; pass mjcf= the path the robot was loaded from."
+        )
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+        spec.compiler.fusestatic = False  # the bodies of jk.load_mjcf, in the same order
+        m = spec.compile()
+    except ValueError as e:
+        text = " ".join(str(e).split())
+        raise ViewerError(
+            f"{path}: MuJoCo could not compile the file with its meshes ({text}); install the "
+            "package that ships them or pass meshes=False to draw link segments instead."
+        ) from e
+    G = mujoco.mjtGeom
+    out = []
+    for g in range(m.ngeom):
+        kind, size = int(m.geom_type[g]), np.asarray(m.geom_size[g], float)
+        rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
+        if m.geom_group[g] >= _MJCF_VISIBLE_GROUPS or rgba[3] == 0:
+            continue  # collision-only by MuJoCo's conventions: hidden group or invisible
+        if kind == G.mjGEOM_MESH:
+            i = int(m.geom_dataid[g])
+            va, vn = int(m.mesh_vertadr[i]), int(m.mesh_vertnum[i])
+            fa, fn = int(m.mesh_faceadr[i]), int(m.mesh_facenum[i])
+            mesh = trimesh.Trimesh(
+                np.array(m.mesh_vert[va : va + vn], float),
+                np.array(m.mesh_face[fa : fa + fn]),
+                process=False,
+            )
+        elif kind == G.mjGEOM_BOX:
+            mesh = trimesh.creation.box(extents=2 * size)
+        elif kind == G.mjGEOM_SPHERE:
+            mesh = trimesh.creation.icosphere(radius=size[0])
+        elif kind == G.mjGEOM_ELLIPSOID:
+            mesh = trimesh.creation.icosphere(radius=1.0)
+            mesh.apply_scale(size)
+        elif kind == G.mjGEOM_CAPSULE:
+            mesh = trimesh.creation.capsule(height=2 * size[1], radius=size[0])
+        elif kind == G.mjGEOM_CYLINDER:
+            mesh = trimesh.creation.cylinder(radius=size[0], height=2 * size[1])
+        else:
+            continue  # planes, height fields, SDFs: no body of a robot
+        colors = (np.clip(np.asarray(rgba, float), 0, 1) * 255).astype(np.uint8)
+        mesh.visual = trimesh.visual.ColorVisuals(
+            mesh, face_colors=np.tile(colors, (len(mesh.faces), 1))
+        )
+        b = int(m.geom_bodyid[g])
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+        body = "world" if b == 0 else body
+        out.append((body, mesh, np.array(m.geom_pos[g], float), np.array(m.geom_quat[g], float)))
+    return out
+
+
+def _mjcf_path(robot: Robot, mjcf: Any) -> Path | None:
+    if mjcf is not None:
+        return Path(mjcf)
+    if robot.name.startswith("mjcf/"):
+        from .robots import mjcf as mjcf_models
+
+        try:
+            return Path(mjcf_models.path(robot.name))
+        except JaxkinError:
+            return None
+    return None
+
+
 def _urdf_path(robot: Robot, urdf: Any) -> Path | None:
     if urdf is not None:
         return Path(urdf)
@@ -280,7 +369,7 @@ class View:
     name; ``mesh_nodes`` lists the mesh nodes.
     """
 
-    def __init__(self, robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf):
+    def __init__(self, robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf):
         viser, trimesh = _viser()
         self.robot = robot
         self.server = server
@@ -311,6 +400,17 @@ class View:
                     position=np.array(vis.xyz, float),
                     wxyz=self._so3.from_rpy_radians(*vis.rpy).wxyz,
                 )
+                self.mesh_nodes.append(name)
+        path = _mjcf_path(robot, mjcf) if meshes and urdf is None else None
+        if path is not None:
+            counts = {}
+            for body, mesh, pos, quat in _mjcf_geoms(path, trimesh):
+                if body not in self.nodes:
+                    continue  # a body of the file that this robot's part left out
+                k = counts.get(body, 0)
+                counts[body] = k + 1
+                name = f"{self.nodes[body]}/visual_{k}"
+                scene.add_mesh_trimesh(name, mesh, position=pos, wxyz=quat)
                 self.mesh_nodes.append(name)
         if not self.mesh_nodes:
             self._segments = [(p, j + 1) for j, p in enumerate(robot.parents)]
@@ -436,6 +536,7 @@ def show(
     host: str = "127.0.0.1",
     frame: int | str | None = None,
     urdf: str | os.PathLike | None = None,
+    mjcf: str | os.PathLike | None = None,
     meshes: bool = True,
     arrow_scale: float = 0.2,
     ellipsoid_scale: float = 0.3,
@@ -445,17 +546,21 @@ def show(
     ``port=None`` picks a free port; ``host`` defaults to loopback (``"0.0.0.0"`` serves other
     machines). ``frame``: where twist and ellipsoid are drawn (default: the robot's default
     frame). ``urdf``: the file the robot was loaded from, for its meshes (found by itself for
-    ``jk.robots.load("erd/...")``); ``meshes=False`` draws link segments instead. Returns a
+    ``jk.robots.load("erd/...")``); ``mjcf``: the same for a robot of :func:`jaxkin.load_mjcf`
+    (found by itself for ``jk.robots.load("mjcf/...")``); ``meshes=False`` draws link segments
+    instead. Returns a
     :class:`View`; see the module doc for what is drawn and the example.
     """
     viser, _ = _viser()
     if not isinstance(robot, Robot):
         raise ViewerError(f"show needs a jaxkin Robot, got {type(robot).__name__}.")
+    if urdf is not None and mjcf is not None:
+        raise ViewerError("pass urdf= or mjcf= (the file the robot was loaded from), not both.")
     if port is None:
         port = _free_port(host)
     server = viser.ViserServer(host=host, port=int(port), verbose=False)
     try:
-        view = View(robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf)
+        view = View(robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf)
         view.update(q, qd)
     except BaseException:
         server.stop()

@@ -1,6 +1,7 @@
-"""jaxkin.viewer: the scene holds one node per frame at its fk_all pose, the URDF's meshes, the
-twist arrows and the velocity ellipsoid; the page is served and headless Chromium connects to it
-and mounts the 3-D view (its camera reaches the server)."""
+"""jaxkin.viewer: the scene holds one node per frame at its fk_all pose, the URDF's meshes, an
+MJCF file's geoms at MuJoCo's poses, the twist arrows and the velocity ellipsoid; the page is
+served and headless Chromium connects to it and mounts the 3-D view (its camera reaches the
+server)."""
 
 import os
 import shutil
@@ -155,3 +156,67 @@ def test_missing_urdf_is_a_clear_error(tmp_path):
     )
     with pytest.raises(jview.ViewerError, match=r"link 'a'.*not a number"):
         jview.urdf_visuals(urdf)
+
+
+def _world(view, node):
+    """World pose (4x4) of a scene node: its parents' poses times its own."""
+    T = np.eye(4)
+    parts = node.strip("/").split("/")
+    for k in range(1, len(parts) + 1):
+        handle = view.server.scene.get_handle_by_name("/" + "/".join(parts[:k]))
+        if handle is None:
+            continue  # "/robot" itself: no node of its own
+        Tk = np.eye(4)
+        Tk[:3, :3] = viser.transforms.SO3(np.asarray(handle.wxyz)).as_matrix()
+        Tk[:3, 3] = handle.position
+        T = T @ Tk
+    return T
+
+
+def test_mjcf_jaco_meshes_sit_at_mujoco_geom_poses():
+    if "mjcf/jaco_arm" not in jk.robots.mjcf_names():
+        pytest.skip("dm-control is not installed (pip install dm-control)")
+    mujoco = pytest.importorskip("mujoco")
+    robot = jk.robots.load("mjcf/jaco_arm")
+    q = np.array([0.3, 2.9, 1.1, -0.7, 0.4, 1.2])
+    # MuJoCo's own compile of the file with its meshes, and its geom poses at qpos = q.
+    m = mujoco.MjModel.from_xml_path(str(jk.robots.mjcf.path("mjcf/jaco_arm")))
+    d = mujoco.MjData(m)
+    d.qpos[:] = q
+    mujoco.mj_kinematics(m, d)
+    expected, counts = {}, {}
+    for g in range(m.ngeom):
+        body = m.body(m.geom_bodyid[g]).name
+        if body not in robot.frame_names or m.geom_group[g] >= 3:
+            continue
+        k = counts.get(body, 0)
+        counts[body] = k + 1
+        expected[f"/robot/{body}/visual_{k}"] = g
+    n_mesh = sum(m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH for g in expected.values())
+    assert n_mesh == 6  # b_base, b_1 .. b_5
+
+    with jview.show(robot, q) as view:
+        assert set(view.mesh_nodes) == set(expected)
+        assert view.server.scene.get_handle_by_name("/robot/links") is None
+        _check_poses(view, robot, q)
+        for node, g in expected.items():
+            T = _world(view, node)
+            np.testing.assert_allclose(T[:3, 3], d.geom_xpos[g], atol=TOL, err_msg=node)
+            R = d.geom_xmat[g].reshape(3, 3)
+            np.testing.assert_allclose(T[:3, :3], R, atol=TOL, err_msg=node)
+
+
+def test_mjcf_with_missing_mesh_files_is_a_clear_error(tmp_path):
+    pytest.importorskip("mujoco")
+    xml = tmp_path / "arm.xml"
+    xml.write_text(
+        '<mujoco model="arm"><asset><mesh name="m" file="nowhere/upper.stl"/></asset>'
+        '<worldbody><body name="upper"><joint name="j" axis="0 0 1"/>'
+        '<geom type="mesh" mesh="m"/></body></worldbody></mujoco>'
+    )
+    robot = jk.load_mjcf(xml)  # jaxkin's kinematics never reads the mesh files
+    with pytest.raises(jview.ViewerError, match=r"upper\.stl.*meshes=False"):
+        jview.show(robot, np.zeros(1), mjcf=xml)
+    with jview.show(robot, np.zeros(1), mjcf=xml, meshes=False) as view:
+        assert view.mesh_nodes == []
+        assert view.server.scene.get_handle_by_name("/robot/links") is not None
