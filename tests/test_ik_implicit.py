@@ -20,6 +20,7 @@ import pytest
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 import jaxkin as jk
 
@@ -205,6 +206,56 @@ def test_active_limit_holds_the_joint(solvers):
         for Ji, bi, dqi in zip(_jacobians(robot, q), _twists(T), dq, strict=True):
             ref = np.linalg.lstsq(Ji[:, free], bi.T, rcond=None)[0].T
             np.testing.assert_allclose(dqi[:, free], ref, rtol=0, atol=1e-9 * np.max(abs(ref)))
+
+
+def _held_newton(robot, T_goal, q, k):
+    """The oracle for a joint held at its limit: Gauss-Newton on the other joints (numpy lstsq on
+    jk.geometric_jacobian, orientation error from scipy's rotation vector), joint k frozen."""
+    q = np.array(q, dtype=np.float64)
+    free = np.arange(robot.dof) != k
+    for _ in range(20):
+        Tq = np.asarray(jk.fk(robot, q))
+        e = np.concatenate(
+            [
+                T_goal[:3, 3] - Tq[:3, 3],
+                Rotation.from_matrix(T_goal[:3, :3] @ Tq[:3, :3].T).as_rotvec(),
+            ]
+        )
+        if np.max(np.abs(e)) <= 1e-14:
+            break
+        J = np.asarray(jk.geometric_jacobian(robot, q))
+        q[free] += np.linalg.lstsq(J[:, free], e, rcond=None)[0]
+    return q, np.max(np.abs(e))
+
+
+def test_active_limit_matches_finite_differences_of_the_held_arm(solvers):
+    """Panda joint 1 held at its upper limit: the derivative of the solution equals central
+    differences (Richardson, h = 1e-5 and 2h) of the arm re-solved with that joint frozen (an
+    independent Gauss-Newton in numpy), joint 1's derivative exactly 0; 1e-6 relative, where
+    the six free columns are well conditioned."""
+    k = 0  # (joint 4's upper limit, -4 degrees, is a nearly straight elbow: singular)
+    solver = solvers("panda")
+    robot = solver.robot
+    q_star, T = _random_targets(robot, 11, 12, at_limit=k)
+    sol, q, dq, _ = _derivatives_no_fd(solver, T, q_star)
+    assert np.all(sol.converged) and not np.any(sol.singular)
+    assert np.all(q[:, k] == np.asarray(robot.upper)[k]) and np.all(dq[:, :, k] == 0.0)
+    free = np.arange(robot.dof) != k
+    s = np.linalg.svd(_jacobians(robot, q)[:, :, free], compute_uv=False)
+    good = np.flatnonzero(s[:, 0] / s[:, -1] <= WELL_CONDITIONED)[:4]  # see WELL_CONDITIONED
+    assert good.size >= 2, s[:, 0] / s[:, -1]
+    for i in good:
+        fds = []
+        for h in (2 * H, H):
+            d = []
+            for X in GENERATORS:
+                plus, res_p = _held_newton(robot, T[i] @ scipy.linalg.expm(h * X), q[i], k)
+                minus, res_m = _held_newton(robot, T[i] @ scipy.linalg.expm(-h * X), q[i], k)
+                assert max(res_p, res_m) <= 1e-13
+                d.append((plus - minus) / (2 * h))
+            fds.append(np.stack(d))
+        fd = (4 * fds[1] - fds[0]) / 3
+        np.testing.assert_allclose(dq[i], fd, rtol=0, atol=REL * np.max(np.abs(fd)))
 
 
 def _derivatives_no_fd(solver, T, q0):
