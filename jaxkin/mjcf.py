@@ -46,8 +46,8 @@ mimic (coupled) joints: the same numbers, including MuJoCo's ``ref`` convention 
 ``qpos = ref`` is at the pose the file draws; jaxkin folds ``-ref`` into the joint's placement,
 so ``q = qpos`` exactly, and ``robot.lower``/``robot.upper`` are ``jnt_range``).
 
-The default frame
------------------
+The default frame of an MJCF model
+----------------------------------
 As for URDF (see :mod:`jaxkin.urdf`, "The default frame"): ``tip=`` (a body or site) when given;
 otherwise the end of the chain of moving joints, following fixed frames (welded bodies, sites)
 down while there is exactly one; none when the moving joints branch (then functions need

@@ -4,8 +4,8 @@
 The files are found through each distribution's file list (nothing of the package is imported or
 executed, nothing is downloaded) and compiled by MuJoCo without their mesh files.
 
-Names
------
+MJCF model names
+----------------
 ``jk.robots.mjcf_names()`` lists the models whose package is installed;
 ``jk.robots.load("mjcf/jaco_arm", dtype=..., tip=..., base=...)`` loads one;
 ``jk.robots.info("mjcf/jaco_arm").source`` is its path. Each model is loaded as the part of the
@@ -13,28 +13,28 @@ file that is the robot (``base``: scene objects with free joints, tables and tar
 out) and, for the arms, as the chain to their standard tool frame (``tip``), which is then the
 default frame; pass ``tip=``/``base=`` to choose another part.
 
-======================  ======================  =============================================
-name                    package                 file; part loaded
-======================  ======================  =============================================
-``mjcf/jaco_arm``       ``dm-control``          ``third_party/kinova/jaco_arm.xml``: Kinova
-                                                Jaco, 6 dof, tip ``wristsite`` (the flange)
-``mjcf/jaco_hand``      ``dm-control``          ``third_party/kinova/jaco_hand.xml``: its
-                                                3-finger hand (branches: no default frame)
-``mjcf/manipulator``    ``dm-control``          ``suite/manipulator.xml``: planar arm, 4 dof,
-                                                tip ``grasp`` (the fingers' coupling is a
-                                                tendon equality: left out)
-``mjcf/reacher``        ``dm-control``          ``suite/reacher.xml``: 2-link planar arm
-``mjcf/fetch``          ``gymnasium-robotics``  ``envs/assets/fetch/reach.xml``: Fetch, base
-                                                slides, torso lift and 7-dof arm (11 dof), tip
-                                                ``robot0:grip``
-``mjcf/shadow_hand``    ``gymnasium-robotics``  ``envs/assets/hand/reach.xml``: Shadow Dexterous
-                                                Hand, 24 dof from ``robot0:hand mount``
-``mjcf/adroit_hand``    ``gymnasium-robotics``  ``envs/assets/adroit_hand/adroit_pen.xml``:
-                                                Adroit (Shadow) hand, 24 dof from ``forearm``
-``mjcf/franka_kitchen`` ``gymnasium-robotics``  ``envs/assets/kitchen_franka/kitchen_assets/
-                                                kitchen_env_model.xml``: Franka Panda, 7 dof,
-                                                base ``panda0_link0``, tip ``end_effector``
-======================  ======================  =============================================
+=======================  ======================  =============================================
+name                     package                 file; part loaded
+=======================  ======================  =============================================
+``mjcf/jaco_arm``        ``dm-control``          ``third_party/kinova/jaco_arm.xml``: Kinova
+                                                 Jaco, 6 dof, tip ``wristsite`` (the flange)
+``mjcf/jaco_hand``       ``dm-control``          ``third_party/kinova/jaco_hand.xml``: its
+                                                 3-finger hand (branches: no default frame)
+``mjcf/manipulator``     ``dm-control``          ``suite/manipulator.xml``: planar arm, 4 dof,
+                                                 tip ``grasp`` (the fingers' coupling is a
+                                                 tendon equality: left out)
+``mjcf/reacher``         ``dm-control``          ``suite/reacher.xml``: 2-link planar arm
+``mjcf/fetch``           ``gymnasium-robotics``  ``envs/assets/fetch/reach.xml``: Fetch, base
+                                                 slides, torso lift and 7-dof arm (11 dof), tip
+                                                 ``robot0:grip``
+``mjcf/shadow_hand``     ``gymnasium-robotics``  ``envs/assets/hand/reach.xml``: Shadow Dexterous
+                                                 Hand, 24 dof from ``robot0:hand mount``
+``mjcf/adroit_hand``     ``gymnasium-robotics``  ``envs/assets/adroit_hand/adroit_pen.xml``:
+                                                 Adroit (Shadow) hand, 24 dof from ``forearm``
+``mjcf/franka_kitchen``  ``gymnasium-robotics``  ``envs/assets/kitchen_franka/kitchen_assets/
+                                                 kitchen_env_model.xml``: Franka Panda, 7 dof,
+                                                 base ``panda0_link0``, tip ``end_effector``
+=======================  ======================  =============================================
 """
 
 from __future__ import annotations
