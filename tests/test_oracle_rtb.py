@@ -118,7 +118,7 @@ def _kernel(robot: jk.Robot, qs: jax.Array, flange: str | None):
     return jax.vmap(one)(qs)
 
 
-_kernel = jax.jit(_kernel, static_argnames="flange", compiler_options=FAST_COMPILE)
+_kernel = jax.jit(_kernel, static_argnums=(0, 2), compiler_options=FAST_COMPILE)  # robot, flange
 
 
 @pytest.fixture(scope="module", params=sorted(RTB_MODELS))
