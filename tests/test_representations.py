@@ -58,15 +58,18 @@ def test_rate_matrix_singularities_and_margin():
 @given(robot_q=jkt.robots_and_configurations(1, 7))
 def test_analytical_equals_blkdiag_Binv_geometric(rep, robot_q):
     robot, q = robot_q
-    Ja, margin = jk.analytical_jacobian(robot, q, rep, return_margin=True)
+
+    @jax.jit  # one compile per random robot (eagerly: one per function)
+    def values(q):
+        Ja, margin = jk.analytical_jacobian(robot, q, rep, return_margin=True)
+        phi = reps.from_matrix(jk.fk(robot, q)[:3, :3], rep)
+        Jg = jk.geometric_jacobian(robot, q)
+        return Ja, margin, phi, Jg, jk.analytical_from_geometric(Jg, phi, rep), jk.fk_all(robot, q)
+
+    Ja, margin, phi, Jg, expected, Ts = jax.device_get(values(q))
     margin = float(margin)
     if margin < 1e-3:
         return  # covered by the singularity tests below
-    R = jk.fk(robot, q)[:3, :3]
-    phi = reps.from_matrix(R, rep)
-    Jg = jk.geometric_jacobian(robot, q)
-    expected = np.asarray(jk.analytical_from_geometric(Jg, phi, rep))
-    Ts = np.asarray(jk.fk_all(robot, q))
     reach = max(1.0, float(np.max(np.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
     if rep == "rotvec" and np.linalg.norm(np.asarray(phi)) > math.pi - 1e-3:
         return  # branch cut at |w| = pi: phi jumps, its derivative is one-sided
@@ -121,15 +124,21 @@ def test_analytical_chain_method_equals_full_jacfwd(rep, robot_q):
     """The default method (hand-built dR/dq chained with jacfwd of the representation map) and
     jax.jacfwd through all of forward kinematics agree."""
     robot, q = robot_q
-    Ja, margin = jk.analytical_jacobian(robot, q, rep, point=[0.1, -0.2, 0.3], return_margin=True)
-    Jf, _ = jk.analytical_jacobian(
-        robot, q, rep, point=[0.1, -0.2, 0.3], method="jacfwd", return_margin=True
-    )
+    point = [0.1, -0.2, 0.3]
+
+    @jax.jit  # one compile per random robot (eagerly: one per function)
+    def values(q):
+        Ja, margin = jk.analytical_jacobian(robot, q, rep, point=point, return_margin=True)
+        Jf, _ = jk.analytical_jacobian(
+            robot, q, rep, point=point, method="jacfwd", return_margin=True
+        )
+        phi = reps.from_matrix(jk.fk(robot, q)[:3, :3], rep)
+        return Ja, margin, Jf, phi, jk.fk_all(robot, q)
+
+    Ja, margin, Jf, phi, Ts = jax.device_get(values(q))
     margin = float(margin)
-    phi = np.asarray(reps.from_matrix(jk.fk(robot, q)[:3, :3], rep))
     if margin < 1e-3 or (rep == "rotvec" and np.linalg.norm(phi) > math.pi - 1e-3):
         return
-    Ts = np.asarray(jk.fk_all(robot, q))
     reach = max(1.0, float(np.max(np.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
     np.testing.assert_allclose(
         np.asarray(Ja), np.asarray(Jf), rtol=0, atol=1e-12 * reach / margin**2
