@@ -18,7 +18,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # HYPOTHESIS_PROFILE=dev to shrink a failure, "thorough" for long randomized runs.
 settings.register_profile(
     "ci",
-    max_examples=25,
+    max_examples=12,  # CI's 20-minute budget; HYPOTHESIS_PROFILE=thorough runs 500
     deadline=None,
     derandomize=True,
     phases=[Phase.explicit, Phase.reuse, Phase.generate],
