@@ -22,7 +22,7 @@ def _reach(robot, q):
     return max(1.0, float(jnp.max(jnp.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
 
 
-@settings(max_examples=8)  # up to 12 joints: each example compiles a large program
+@settings(max_examples=5)  # up to 12 joints: each example compiles a large program
 @given(jkt.robots_and_configurations(1, 12, kind="dh"))
 def test_triangle_dh(robot_q):
     robot, q = robot_q
