@@ -19,6 +19,7 @@ import numpy as np
 
 from .errors import JaxkinPrecisionWarning, ModelError
 from .model import JOINT_KINDS, Robot
+from .rigid import quaternion_matrix
 
 __all__ = [
     "MimicError",
@@ -373,14 +374,7 @@ def _quat_matrix(value: Any, where: str) -> np.ndarray:
     norm = math.hypot(*(float(x) for x in q))
     if norm == 0.0:
         raise ModelError(f"{where} is the zero quaternion; give a rotation, e.g. (1, 0, 0, 0).")
-    w, x, y, z = q / norm
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return quaternion_matrix(q)
 
 
 def rotation_to_rpy(R: Any) -> np.ndarray:

@@ -66,6 +66,7 @@ import numpy as np
 
 from .errors import JaxkinError, ModelError
 from .model import Robot
+from .rigid import axis_rotation, homogeneous, quaternion_matrix
 
 __all__ = ["MJCFDependencyError", "MJCFError", "load_mjcf"]
 
@@ -182,34 +183,6 @@ def _names(mujoco, m) -> tuple[list[str], list[str], list[str]]:
     return bodies, joints, sites
 
 
-def _quat_matrix(q) -> np.ndarray:
-    w, x, y, z = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' rotation about a unit axis."""
-    x, y, z = axis
-    c, s = math.cos(angle), math.sin(angle)
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
-
-
-def _T(R: np.ndarray | None = None, p=None) -> np.ndarray:
-    T = np.eye(4)
-    if R is not None:
-        T[:3, :3] = R
-    if p is not None:
-        T[:3, 3] = p
-    return T
-
-
 def _fixed(name: str, parent: str, child: str, T: np.ndarray) -> dict[str, Any]:
     return dict(name=name, type="fixed", parent=parent, child=child, transform=T)
 
@@ -221,7 +194,7 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
     """Joint specs that place body ``b`` (and its joints' anchor frames) in its parent."""
     bodies, joints, frame_name = names
     parent = bodies[int(m.body_parentid[b])]
-    T = _T(_quat_matrix(m.body_quat[b]), m.body_pos[b])
+    T = homogeneous(quaternion_matrix(m.body_quat[b]), m.body_pos[b])
     adr, num = int(m.body_jntadr[b]), int(m.body_jntnum[b])
     if num == 0:
         return [_fixed(f"weld:{bodies[b]}", parent, bodies[b], T)]
@@ -244,9 +217,9 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
         ref = float(m.qpos0[m.jnt_qposadr[j]])
         anchor = np.array(m.jnt_pos[j], dtype=float) if jtype == "hinge" else np.zeros(3)
         if jtype == "hinge":  # Rot(axis, qpos - ref) = Rot(axis, -ref) Rot(axis, qpos)
-            T = T @ _T(_axis_rotation(axis, -ref), anchor)
+            T = T @ homogeneous(axis_rotation(axis, -ref), anchor)
         else:  # Trans(axis (qpos - ref)) = Trans(-ref axis) Trans(axis qpos)
-            T = T @ _T(None, -ref * axis)
+            T = T @ homogeneous(None, -ref * axis)
         # Its own frame at the anchor, unless it is the body's last joint and sits at its origin.
         last, at_origin = k == num - 1, not np.any(anchor != 0.0)
         child = bodies[b] if last and at_origin else frame_name(joints[j])
@@ -263,7 +236,7 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
         )
         specs.append(spec)
         parent = child
-        T = _T(None, -anchor)
+        T = homogeneous(None, -anchor)
     if specs[-1]["child"] != bodies[b]:
         specs.append(_fixed(f"weld:{bodies[b]}", parent, bodies[b], T))
     return specs
@@ -283,7 +256,7 @@ def _all_specs(mujoco, m, label: str) -> tuple[list[dict[str, Any]], dict[str, s
     taken |= {s["child"] for s in specs}
     for s in range(m.nsite):
         b = int(m.site_bodyid[s])
-        T = _T(_quat_matrix(m.site_quat[s]), m.site_pos[s])
+        T = homogeneous(quaternion_matrix(m.site_quat[s]), m.site_pos[s])
         child = frame_name(sites[s], "site")
         taken.add(child)
         specs.append(_fixed(f"site:{sites[s]}", bodies[b], child, T))

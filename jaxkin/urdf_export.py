@@ -33,24 +33,9 @@ from ._checks import is_traced
 from .errors import ModelError
 from .model import Robot
 from .placements import joint_placements
+from .rigid import axis_rotation, homogeneous
 
 __all__ = ["to_urdf"]
-
-
-def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation by ``angle`` about the unit ``axis`` (Rodrigues)."""
-    k = axis / np.linalg.norm(axis)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
-
-
-def _transform(R: np.ndarray | None, p: np.ndarray | None) -> np.ndarray:
-    T = np.eye(4)
-    if R is not None:
-        T[:3, :3] = R
-    if p is not None:
-        T[:3, 3] = p
-    return T
 
 
 def _rpy(R: np.ndarray) -> tuple[float, float, float]:
@@ -59,7 +44,7 @@ def _rpy(R: np.ndarray) -> tuple[float, float, float]:
     ``[0, cos(roll), -sin(roll)]`` and first column ``[cos(pitch), 0, -sin(pitch)]`` for any
     yaw."""
     yaw = math.atan2(R[1, 0], R[0, 0])
-    M = _rot(np.array([0.0, 0.0, 1.0]), -yaw) @ R
+    M = axis_rotation(np.array([0.0, 0.0, 1.0]), -yaw) @ R
     return math.atan2(-M[1, 2], M[1, 1]), math.atan2(-M[2, 0], M[0, 0]), yaw
 
 
@@ -180,7 +165,7 @@ class _Writer:
         when it has a placement ``A_j``."""
         robot, pl = self.robot, self.pl
         parent, child = self.frames[robot.parents[j]], self.frames[j + 1]
-        B = _transform(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
+        B = homogeneous(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
         has_A = pl.A is not None
         motion_link = self._new_link(f"{child}_motion") if has_A else child
         if robot.kinds[j] == "fixed":
@@ -188,7 +173,7 @@ class _Writer:
         else:
             out = self._moving(j, parent, motion_link, B)
         if has_A:
-            A = _transform(pl.A[0][j], pl.A[1][j])
+            A = homogeneous(pl.A[0][j], pl.A[1][j])
             out += _fixed(_fresh(f"{child}_dh", self.joints), motion_link, child, A)
         return out
 
@@ -205,9 +190,9 @@ class _Writer:
         i = robot.q_index[j]
         a = self.axis[j] / np.linalg.norm(self.axis[j])
         if kind == "revolute":
-            B = B @ _transform(_rot(a, self.offset[j]), None)
+            B = B @ homogeneous(axis_rotation(a, self.offset[j]), None)
         else:
-            B = B @ _transform(None, a * self.offset[j])
+            B = B @ homogeneous(None, a * self.offset[j])
         lead = self.leader[i]
         if lead == j:
             name, a_out = robot.joint_names[i], a * np.sign(mult[j])
