@@ -79,9 +79,6 @@ EAGER_CACHE_SIZE = 128
 recently used is dropped first, so the cache neither keeps robots alive for ever nor grows
 without bound."""
 
-EAGER_COMPILE_CALL = 1
-"""The call of a ``(kernel, robot, static options)`` key that compiles (1: the first)."""
-
 _eager_cache: collections.OrderedDict = collections.OrderedDict()
 
 
@@ -102,29 +99,21 @@ def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
         return kernel(robot, *static, *arrays)
     key = (kernel, robot, static)
     try:
-        entry = _eager_cache.pop(key, 0)
+        compiled = _eager_cache.pop(key, None)
     except TypeError:  # an unhashable static option: no cache
         return kernel(robot, *static, *arrays)
-    if isinstance(entry, int):
-        if entry + 1 < EAGER_COMPILE_CALL:
-            _eager_cache[key] = entry + 1
-            _evict()
-            return kernel(robot, *static, *arrays)
+    if compiled is None:
         options = compiler_options() or None
-        entry = jax.jit(functools.partial(kernel, robot, *static), compiler_options=options)
-    _eager_cache[key] = entry
-    _evict()
-    return entry(*arrays)
+        compiled = jax.jit(functools.partial(kernel, robot, *static), compiler_options=options)
+    _eager_cache[key] = compiled  # most recently used last
+    while len(_eager_cache) > EAGER_CACHE_SIZE:
+        _eager_cache.popitem(last=False)
+    return compiled(*arrays)
 
 
 def _jit_disabled() -> bool:
     """True inside ``jax.disable_jit()``: kernels then run op by op and nothing is cached."""
     return bool(jax.config.jax_disable_jit)
-
-
-def _evict() -> None:
-    while len(_eager_cache) > EAGER_CACHE_SIZE:
-        _eager_cache.popitem(last=False)
 
 
 def eager_cache_clear() -> None:
@@ -133,11 +122,9 @@ def eager_cache_clear() -> None:
 
 
 def eager_cache_info() -> dict:
-    """``{"entries": keys held, "compiled": keys with an executable, "executables": compiled
-    (shape, dtype) variants in all}``; for tests and the curious."""
-    compiled = [v for v in _eager_cache.values() if not isinstance(v, int)]
+    """``{"entries": keys held, "executables": compiled (shape, dtype) variants in all}``; for
+    tests and the curious."""
     return {
         "entries": len(_eager_cache),
-        "compiled": len(compiled),
-        "executables": sum(v._cache_size() for v in compiled),
+        "executables": sum(v._cache_size() for v in _eager_cache.values()),
     }

@@ -11,7 +11,7 @@ costs a load, not a compile). jaxkin never changes JAX's global settings by itse
 >>> import jaxkin as jk
 >>> info = jk.compilation.eager_cache_info()
 >>> sorted(info)
-['compiled', 'entries', 'executables']
+['entries', 'executables']
 """
 
 from __future__ import annotations
