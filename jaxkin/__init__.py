@@ -11,6 +11,7 @@ Conventions: ``T_a_b`` is the pose of b in a; twists and Jacobian rows are ``[v;
 from . import analysis as analysis
 from . import calibration as calibration
 from . import compilation as compilation
+from . import configuration as configuration
 from . import derivatives as derivatives
 from . import ik as ik
 from . import inverse_velocity as inverse_velocity
@@ -30,6 +31,10 @@ from .analysis import wrist_centre as wrist_centre
 from .analysis import wrist_decoupling as wrist_decoupling
 from .calibration import calibrate as calibrate
 from .calibration import identifiability as identifiability
+from .configuration import difference as difference
+from .configuration import integrate as integrate
+from .configuration import neutral as neutral
+from .configuration import normalize as normalize
 from .derivatives import analytical_jacobian_dot as analytical_jacobian_dot
 from .derivatives import analytical_jacobian_dot_qd as analytical_jacobian_dot_qd
 from .derivatives import jacobian_dot as jacobian_dot

@@ -171,35 +171,110 @@ def check_robot(robot: Any, fn: str) -> Robot:
 
 
 def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", batch_hint=None):
-    """A joint vector of shape (dof,) as a float JAX array (integers take the robot's dtype).
+    """A configuration of shape (nq,) as a float JAX array (integers take the robot's dtype).
 
-    ``batch_hint`` is the code to suggest for a batch (default: ``jax.vmap(lambda q: fn(robot,
-    q))(qs)``); it must run when pasted.
+    For a robot with free or ball joints, a concrete ``q`` whose quaternion is zero or not
+    finite raises (no rotation exists; under a trace the result is NaN instead). ``batch_hint``
+    is the code to suggest for a batch (default: ``jax.vmap(lambda q: fn(robot, q))(qs)``); it
+    must run when pasted.
     """
     check_robot(robot, fn)
+    nq = robot.nq
     if (
         isinstance(q, jax.Array)
         and not isinstance(q, jax.core.Tracer)
-        and q.shape == (robot.dof,)
+        and q.shape == (nq,)
         and q.dtype in _FLOATS
     ):
+        if robot.nq != robot.nv:
+            check_rotations(robot, q, what, fn)
         return q  # the common case, fast: eager calls must not cost milliseconds
     q = _as_array(q, what, fn, "an array of numbers")
     _numeric(q, what, fn)
     shape = tuple(q.shape)
-    if shape != (robot.dof,):
+    if shape != (nq,):
         hint = ""
-        if len(shape) >= 2 and shape[-1] == robot.dof:
+        if len(shape) >= 2 and shape[-1] == nq:
             hint = _batch_hint(
                 "configurations", batch_hint or f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
             )
         elif len(shape) == 1:
-            hint = f" Give one value per joint {list(robot.joint_names)}."
+            hint = f" Give one value per joint coordinate {list(robot.joint_names)}."
+        joints = f"{nq} joints" if nq == robot.nv else f"nq = {nq} coordinates, nv = {robot.nv}"
         raise ShapeError(
-            f"{fn}: {what} must have shape ({robot.dof},) for robot {robot.name!r} "
-            f"({robot.dof} joints), got shape {shape}.{hint}"
+            f"{fn}: {what} must have shape ({nq},) for robot {robot.name!r} "
+            f"({joints}), got shape {shape}.{hint}"
         )
-    return _float_array(q, robot.dtype)
+    q = _float_array(q, robot.dtype)
+    if robot.nq != robot.nv:
+        check_rotations(robot, q, what, fn)
+    return q
+
+
+def check_rotations(robot: Robot, q: Any, what: str, fn: str) -> None:
+    """Eagerly: raise when a free or ball joint's quaternion (or a planar joint's (cos, sin)) in
+    the configuration ``q`` is zero or not finite. A traced ``q`` is not checked (the kernels
+    give NaN there)."""
+    if is_traced(q):
+        return
+    a = np.asarray(q, dtype=np.float64)
+    for j in robot.multi_dof_joints:
+        kind, qi = robot.kinds[j], robot.q_index[j]
+        part = {"free": (3, 7), "ball": (0, 4), "planar": (2, 4)}[kind]
+        r = a[qi + part[0] : qi + part[1]]
+        if not np.all(np.isfinite(r)) or not np.any(r != 0.0):
+            name = robot.joint_names[qi].rsplit(".", 1)[0]
+            entries = list(robot.joint_names[qi + part[0] : qi + part[1]])
+            what_r = "(cos, sin) pair" if kind == "planar" else "quaternion (qw, qx, qy, qz)"
+            raise JaxkinError(
+                f"{fn}: the {what_r} of {kind} joint {name!r} in {what} ({entries} = "
+                f"{r.tolist()}) is {'zero' if np.all(np.isfinite(r)) else 'not finite'}, so it "
+                "is no rotation. Use a unit one (the identity is "
+                f"{'(1, 0)' if kind == 'planar' else '(1, 0, 0, 0)'}; jk.neutral(robot) gives a "
+                "valid configuration)."
+            )
+
+
+def check_v(robot: Robot, v: Any, what: str = "qd", fn: str = "this function", batch_hint=None):
+    """A velocity (tangent vector) of shape (nv,) as a float JAX array; for robots without free,
+    ball or planar joints this is :func:`check_q` (nv == nq)."""
+    if robot.nq == robot.nv:
+        return check_q(robot, v, what, fn, batch_hint)
+    check_robot(robot, fn)
+    nv = robot.nv
+    v = _as_array(v, what, fn, "an array of numbers")
+    _numeric(v, what, fn)
+    shape = tuple(v.shape)
+    if shape != (nv,):
+        hint = ""
+        if len(shape) >= 2 and shape[-1] == nv:
+            hint = _batch_hint("velocities", batch_hint or "jax.vmap")
+        raise ShapeError(
+            f"{fn}: {what} must have shape ({nv},) for robot {robot.name!r} (a velocity: nv = "
+            f"{nv} entries {list(robot.velocity_names)}; q has nq = {robot.nq}), got shape "
+            f"{shape}.{hint}"
+        )
+    return _float_array(v, robot.dtype)
+
+
+def refuse_multi_dof(robot: Robot, fn: str, why: str = "") -> None:
+    """Raise :class:`~jaxkin.JaxkinError` when ``robot`` has a free, ball or planar joint, for a
+    function ``fn`` that treats ``q`` as a vector space."""
+    check_robot(robot, fn)
+    joints = robot.multi_dof_joints
+    if not joints:
+        return
+    names = []
+    for j in joints:
+        qi = robot.q_index[j]
+        label = robot.joint_names[qi].rsplit(".", 1)[0] if qi >= 0 else robot.frame_names[j + 1]
+        names.append(f"{label!r} ({robot.kinds[j]})")
+    raise JaxkinError(
+        f"{fn} does not support robot {robot.name!r}: it has free, ball or planar joints "
+        f"({', '.join(names)}), whose configuration (unit quaternions, (cos, sin) pairs) is not a "
+        f"vector space, and {fn} {why or 'treats q as one'}. Use it on a fixed-base robot (e.g. "
+        "load the chain without floating_base, or with base=<a link> below the joint)."
+    )
 
 
 def check_vector(x: Any, n: int, what: str, fn: str, meaning: str, hint: str = "") -> Any:

@@ -60,6 +60,7 @@ from ._checks import (
     check_reference,
     finite_guard,
     is_traced,
+    refuse_multi_dof,
     result_dtype,
 )
 from .errors import JaxkinError, ShapeError
@@ -339,6 +340,7 @@ def manipulability_gradient(
     Non-finite ``q`` or ``point`` (module doc): raises eagerly; NaN under a trace.
     """
     fn = "jk.manipulability_gradient"
+    refuse_multi_dof(robot, fn, "differentiates with respect to q in a vector space")
     check_reference(reference)
     _check_measure(measure, fn)
     q = check_q(robot, q, fn=fn)
@@ -459,6 +461,7 @@ class WristDecoupling(NamedTuple):
 
 
 def _wrist_joint_indices(robot: Robot, wrist_joints, fn: str) -> tuple[tuple[int, ...], tuple]:
+    refuse_multi_dof(robot, fn, "needs 6 revolute or prismatic joints")
     if robot.dof != 6:
         raise JaxkinError(
             f"{fn}: the arm/wrist decoupling needs a 6-dof robot (3 arm joints, 3 wrist joints); "

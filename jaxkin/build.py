@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import JaxkinPrecisionWarning, ModelError
-from .model import JOINT_KINDS, Robot
+from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot
 from .rigid import quaternion_matrix
 
 __all__ = [
@@ -148,6 +148,7 @@ def from_dh(
         kinds=kinds,
         parents=list(range(n)),
         q_index=list(range(n)),
+        v_index=list(range(n)),
         offset=offsets,
         multiplier=[1.0] * n,
         lower=lowers,
@@ -174,8 +175,10 @@ def from_joints(
 
     Args:
       joints: one mapping per joint, parents before children, with keys ``name``, ``type``
-        (``"revolute"``, ``"prismatic"`` or ``"fixed"``), ``child`` (the name of the frame the
-        joint moves), optional ``parent`` (a frame name; default: the previous joint's child),
+        (``"revolute"``, ``"prismatic"``, ``"fixed"``, or the multi-coordinate ``"free"`` (also
+        spelt ``"floating"``), ``"ball"`` and ``"planar"``: see below), ``child`` (the name of
+        the frame the joint moves), optional ``parent`` (a frame name; default: the previous joint's
+        child),
         ``xyz`` and ``rpy`` (the joint origin in the parent frame, URDF fixed-axis roll-pitch-
         yaw ``R = Rz(y) Ry(p) Rx(r)``; default zeros), ``axis`` (in the joint frame, normalised;
         default (1, 0, 0) as in URDF), ``lower``, ``upper``, ``mimic``. Instead of ``rpy`` the
@@ -189,6 +192,15 @@ def from_joints(
 
     ``T_parent_child(q) = Trans(xyz) Rot(rpy) Motion(axis, value)``, as in URDF, where
     ``value = q[i]`` for an independent joint.
+
+    Free, ball and planar joints take several entries of ``q`` and of the velocity ``v`` (see
+    :mod:`jaxkin.configuration` for their coordinates and :data:`jaxkin.model.JOINT_SIZES`):
+    free ``q = (x, y, z, qw, qx, qy, qz)``, ball ``(qw, qx, qy, qz)``, planar ``(x, y, cos,
+    sin)`` (motion in the joint frame's xy plane; ``axis``, if given, must be ``(0, 0, 1)``).
+    Their ``q`` entries are named ``"<name>.x"``, ``"<name>.qw"`` ... in ``joint_names``; their
+    limits are fixed (translations unbounded, quaternion and cos/sin entries in [-1, 1]), so they
+    take no ``lower``/``upper``; they cannot mimic nor be mimicked. A free joint's ``axis`` is
+    ignored.
 
     Mimic joints (URDF ``<mimic>``): ``mimic={"joint": leader, "multiplier": m, "offset": o}``
     (multiplier default 1, offset default 0) makes a revolute or prismatic joint follow the
@@ -237,7 +249,7 @@ def from_joints(
     rpy = [s.rpy for s in specs]
     axes = [s.axis for s in specs]
     parents = [s.parent for s in specs]
-    q_index, multiplier, offset, joint_names, lowers, uppers = _drive(specs, leaders)
+    q_index, v_index, multiplier, offset, joint_names, lowers, uppers = _drive(specs, leaders)
     params = {  # reshape: a robot with no joint at all (only its root frame) has (0, 3) leaves
         "xyz": jnp.asarray(np.array(xyz, dtype=float).reshape(-1, 3), dtype=dt),
         "rpy": jnp.asarray(np.array(rpy, dtype=float).reshape(-1, 3), dtype=dt),
@@ -250,6 +262,7 @@ def from_joints(
         kinds=kinds,
         parents=parents,
         q_index=q_index,
+        v_index=v_index,
         offset=offset,
         multiplier=multiplier,
         lower=lowers,
@@ -288,7 +301,7 @@ class _Joint(NamedTuple):
     xyz: np.ndarray
     rpy: np.ndarray
     axis: np.ndarray
-    limits: tuple[float, float] | None  # None for fixed joints
+    limits: tuple[float, float] | None  # None for fixed, free, ball and planar joints
     mimic: tuple[str, float, float] | None
 
 
@@ -304,9 +317,12 @@ def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
     jname = str(spec["name"])
     where = f"joint {jname!r}"
     kind = spec["type"]
+    if kind == "floating":
+        kind = "free"
     if kind not in JOINT_KINDS:
         raise ModelError(
-            f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic' or 'fixed'."
+            f"{where} has unknown type {kind!r}; use 'revolute', 'prismatic', 'fixed', 'free' "
+            "(or 'floating'), 'ball' or 'planar'."
         )
     parent_name = spec.get("parent", frame_names[-1])
     if not isinstance(parent_name, str) or parent_name not in frame_of:
@@ -327,8 +343,29 @@ def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
                 f"{where} is fixed but has a mimic; only revolute and prismatic joints "
                 "can mimic another joint."
             )
+        if kind in COORDINATES:
+            raise ModelError(
+                f"{where} is {kind} but has a mimic; only revolute and prismatic joints can "
+                "mimic another joint."
+            )
         mimic = _mimic_spec(mimic, where)
-    if kind != "fixed":
+    if kind in COORDINATES:
+        given = sorted(k for k in ("lower", "upper") if spec.get(k) is not None)
+        if given:
+            raise ModelError(
+                f"{where} is {kind} and takes no {'/'.join(given)}: its limits are fixed "
+                "(translations unbounded, quaternion and cos/sin entries in [-1, 1])."
+            )
+        if kind == "planar" and "axis" in spec:
+            ax = _unit_axis(spec["axis"], kind, where)
+            if np.max(np.abs(ax - (0.0, 0.0, 1.0))) > 1e-12:
+                raise ModelError(
+                    f"{where} is planar with axis {ax.tolist()}; a planar joint moves in its "
+                    "joint frame's xy plane (normal (0, 0, 1), as Pinocchio's JointModelPlanar). "
+                    "Rotate the joint frame with rpy/quat so that the plane's normal is its z "
+                    "axis."
+                )
+    elif kind != "fixed":
         limits = _limits(spec, where)
     xyz, rpy = _placement(spec, where)
     return _Joint(
@@ -337,7 +374,11 @@ def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
         parent=frame_of[parent_name],
         xyz=xyz,
         rpy=rpy,
-        axis=_unit_axis(spec.get("axis", (1.0, 0.0, 0.0)), kind, where),
+        axis=_unit_axis(
+            spec.get("axis", (1.0, 0.0, 0.0)) if kind not in COORDINATES else (0.0, 0.0, 1.0),
+            kind,
+            where,
+        ),
         limits=limits,
         mimic=mimic,
     )
@@ -424,9 +465,10 @@ def _limits(spec: Mapping[str, Any], where: str) -> tuple[float, float]:
 
 
 def _drive(joints: list[_Joint], leaders: Sequence[Mapping[str, Any]]):
-    """Which entry of ``q`` drives each joint, and how: ``(q_index, multiplier, offset,
-    joint_names, lower, upper)``. Independent joints get entries in order; mimic joints are
-    resolved once (:func:`resolve_mimics`); a leader outside the structure (``leaders``) that
+    """Which entries of ``q`` and ``v`` drive each joint, and how: ``(q_index, v_index,
+    multiplier, offset, joint_names, lower, upper)``. Independent joints get entries in order
+    (a free, ball or planar joint several, see :data:`jaxkin.model.JOINT_SIZES`); mimic joints
+    are resolved once (:func:`resolve_mimics`); a leader outside the structure (``leaders``) that
     ends a mimic chain gets the entry where its first follower is."""
     kind_of = {j.name: j.kind for j in joints}
     limits = {j.name: j.limits for j in joints}
@@ -444,21 +486,35 @@ def _drive(joints: list[_Joint], leaders: Sequence[Mapping[str, Any]]):
     except MimicError as e:
         raise ModelError(str(e)) from None
     inside = {j.name for j in joints}
-    q_of: dict[str, int] = {}  # independent joint name -> index into q
+    q_of: dict[str, tuple[int, int]] = {}  # independent joint name -> start in q and in v
+    nq = nv = 0
     for j in joints:
         driver = resolved[j.name][0] if j.name in resolved else j.name
         if j.kind != "fixed" and driver not in q_of and (driver == j.name or driver not in inside):
-            q_of[driver] = len(q_of)
+            q_of[driver] = (nq, nv)
+            sq, sv = JOINT_SIZES[kind_of[driver]]
+            nq, nv = nq + sq, nv + sv
     n = len(joints)
-    multiplier, offset, q_index = [1.0] * n, [0.0] * n, [-1] * n
+    multiplier, offset, q_index, v_index = [1.0] * n, [0.0] * n, [-1] * n, [-1] * n
     for i, j in enumerate(joints):
         if j.kind != "fixed":
             driver, multiplier[i], offset[i] = resolved.get(j.name, (j.name, 1.0, 0.0))
-            q_index[i] = q_of[driver]
-    names = list(q_of)  # empty for a robot with no moving joint (dof 0)
-    lower = [limits[k][0] for k in names]
-    upper = [limits[k][1] for k in names]
-    return q_index, multiplier, offset, names, lower, upper
+            q_index[i], v_index[i] = q_of[driver]
+    names, lower, upper = [], [], []  # empty for a robot with no moving joint (dof 0)
+    for k in q_of:
+        kind = kind_of[k]
+        if kind in COORDINATES:
+            coords = COORDINATES[kind][0]
+            names += [f"{k}.{c}" for c in coords]
+            for c in coords:
+                bound = math.inf if c in ("x", "y", "z") else 1.0
+                lower.append(-bound)
+                upper.append(bound)
+        else:
+            names.append(k)
+            lower.append(limits[k][0])
+            upper.append(limits[k][1])
+    return q_index, v_index, multiplier, offset, names, lower, upper
 
 
 def _build(
@@ -500,6 +556,7 @@ def _build(
         kinds=tuple(static.pop("kinds")),
         parents=tuple(int(p) for p in static.pop("parents")),
         q_index=tuple(int(i) for i in static.pop("q_index")),
+        v_index=tuple(int(i) for i in static.pop("v_index")),
         joint_names=tuple(static.pop("joint_names")),
         frame_names=tuple(frame_names),
         has_tool=has_tool,

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import check_poses, finite_guard, is_traced
+from ._checks import check_poses, finite_guard, is_traced, refuse_multi_dof
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .kinematics import forward_pass
@@ -207,6 +207,7 @@ _residuals = robot_jit(_residuals_impl, ("masks_key", "f"))
 
 def _check_qs(robot: Robot, qs: Any, fn: str):
     """Configurations (M, dof), M >= 1, as the robot's dtype, and their non-finite guard."""
+    refuse_multi_dof(robot, fn, "fits joint offsets and parameters of 1-dof joints only")
     qs = jnp.asarray(qs)
     if qs.ndim != 2 or qs.shape[1] != robot.dof:
         raise ShapeError(f"{fn}: qs must have shape (M, {robot.dof}), got {qs.shape}.")

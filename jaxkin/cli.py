@@ -566,7 +566,16 @@ def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None =
 
 
 def _movable(robot, spec: str):
-    """``robot``, or a :class:`UsageError` when it has no moving joint (nothing to compute)."""
+    """``robot``, or a :class:`UsageError` when it has no moving joint (nothing to compute) or
+    has free, ball or planar joints (the command line samples q in a box)."""
+    if robot.multi_dof_joints:
+        kinds = sorted({robot.kinds[j] for j in robot.multi_dof_joints})
+        raise UsageError(
+            f"robot {spec!r} has {'/'.join(kinds)} joints (unit quaternions or (cos, sin) pairs "
+            "in q); the command line handles robots with revolute and prismatic joints only. "
+            "Use the Python API (jk.sample_configurations, jk.geometric_jacobian, ...), or "
+            "--base below the joint"
+        )
     if robot.dof == 0:
         raise UsageError(
             f"robot {spec!r} has no moving joint (dof 0): there is nothing to move; "

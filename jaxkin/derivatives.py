@@ -25,6 +25,11 @@ Pinocchio's ``getFrameJacobianTimeVariation(..., LOCAL)``; ``"world"`` equals Pi
 ``WORLD`` and ``"world_aligned"`` its ``LOCAL_WORLD_ALIGNED`` (tests/test_derivatives.py checks
 all three, and Pinocchio's ``getJointKinematicHessian``).
 
+Robots with free, ball or planar joints (``robot.nq != robot.nv``, :mod:`jaxkin.configuration`):
+``qd`` is a velocity of shape (nv,) and derivatives are taken along the configuration manifold,
+``d/dt J(integrate(robot, q, t qd))`` at ``t = 0``; ``H`` is (nv, 6, nv), ``H[k]`` the derivative
+along ``integrate(robot, q, v)`` with respect to ``v_k`` at ``v = 0``.
+
 Each kernel takes one configuration; batch with ``jax.vmap``.
 """
 
@@ -35,8 +40,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from ._checks import check_point, check_q, check_reference, result_dtype
+from ._checks import check_point, check_q, check_reference, check_v, result_dtype
 from ._jit import eager
+from .configuration import integrate_kernel
 from .jacobians import analytical_jacobian_pass, jacobian_pass
 from .model import Robot
 from .representations import check_representation, guard_singular
@@ -55,7 +61,10 @@ def _check_call(robot: Robot, q: Any, qd: Any, frame, point, reference: str, fn:
     check_reference(reference)
     hint = hint or f"jax.vmap(lambda q, qd: {fn}(robot, q, qd))(qs, qds)"
     q = check_q(robot, q, fn=fn, batch_hint=hint)
-    qd = check_q(robot, qd, what="qd", fn=fn, batch_hint=hint)
+    if qd is None:  # the Hessian: no velocity
+        qd = q
+    else:
+        qd = check_v(robot, qd, what="qd", fn=fn, batch_hint=hint)
     dtype = result_dtype(robot, q, qd)
     pt = check_point(point, dtype, fn)
     return q.astype(dtype), qd.astype(dtype), robot.frame_index(frame), pt
@@ -99,11 +108,21 @@ def jacobian_dot(
     return eager(_jacobian_dot, robot, (f, reference), q, qd, pt)
 
 
+def _tangent(robot, q, fun):
+    """``(g, x0)``: ``fun`` and ``q`` itself (nq == nv), or ``v -> fun(integrate(q, v))`` and
+    ``v = 0`` (free, ball or planar joints), so that derivatives of ``g`` at ``x0`` are taken
+    along the configuration manifold."""
+    if robot.nq == robot.nv:
+        return fun, q
+    return (lambda v: fun(integrate_kernel(robot, q, v))), jnp.zeros(robot.nv, q.dtype)
+
+
 def _jacobian_dot(robot, f, reference, q, qd, pt):
     def J(qq):
         return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
-    return jax.jvp(J, (q,), (qd,))[1]
+    g, x0 = _tangent(robot, q, J)
+    return jax.jvp(g, (x0,), (qd,))[1]
 
 
 def jacobian_dot_qd(
@@ -135,7 +154,8 @@ def _jacobian_dot_qd(robot, f, reference, q, qd, pt):
     def V(qq):
         return jacobian_pass(robot, qq, f, pt, reference).times(qd)
 
-    return jax.jvp(V, (q,), (qd,))[1]
+    g, x0 = _tangent(robot, q, V)
+    return jax.jvp(g, (x0,), (qd,))[1]
 
 
 def kinematic_hessian(
@@ -169,7 +189,7 @@ def kinematic_hessian(
     """
     fn = "jk.kinematic_hessian"
     hint = f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
-    q, _, f, pt = _check_call(robot, q, q, frame, point, reference, fn, hint)
+    q, _, f, pt = _check_call(robot, q, None, frame, point, reference, fn, hint)
     return eager(_hessian, robot, (f, reference), q, pt)
 
 
@@ -177,7 +197,8 @@ def _hessian(robot, f, reference, q, pt):
     def J(qq):
         return jacobian_pass(robot, qq, f, pt, reference).matrix()
 
-    dJ = jax.jacfwd(J)(q)  # (6, dof_j, dof_k)
+    g, x0 = _tangent(robot, q, J)
+    dJ = jax.jacfwd(g)(x0)  # (6, dof_j, dof_k)
     return jnp.transpose(dJ, (2, 0, 1))
 
 
@@ -258,7 +279,8 @@ def _analytical_dot(robot, f, representation, q, qd, pt):
     def Ja(qq):
         return analytical_jacobian_pass(robot, qq, f, pt, representation)
 
-    (_, margin), (Jad, _) = jax.jvp(Ja, (q,), (qd,))
+    g, x0 = _tangent(robot, q, Ja)
+    (_, margin), (Jad, _) = jax.jvp(g, (x0,), (qd,))
     return Jad, margin
 
 
@@ -267,5 +289,6 @@ def _analytical_dot_qd(robot, f, representation, q, qd, pt):
         Ja, margin = analytical_jacobian_pass(robot, qq, f, pt, representation)
         return Ja @ qd, margin
 
-    (_, margin), (acc, _) = jax.jvp(xd, (q,), (qd,))
+    g, x0 = _tangent(robot, q, xd)
+    (_, margin), (acc, _) = jax.jvp(g, (x0,), (qd,))
     return acc, margin

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import sampling, spatial
-from ._checks import check_poses, check_q, check_robot, is_traced, safe_norm
+from ._checks import check_poses, check_q, check_robot, is_traced, refuse_multi_dof, safe_norm
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .ik_gradients import full_rank, solution_tangent
@@ -668,6 +668,7 @@ def solve_ik(
     fn = "jk.solve_ik"
     _check_settings(fn, method, max_steps, num_seeds, patience)
     check_robot(robot, fn)
+    refuse_multi_dof(robot, fn, "steps q in a vector space (q + dq) and clips it to box limits")
     f = robot.frame_index(frame)
     dtype = np.dtype(robot.dtype)
     T, batched = check_poses(T_target, fn, "T_target", dtype)

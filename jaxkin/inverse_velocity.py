@@ -44,6 +44,7 @@ from ._checks import (
     check_q,
     finite_guard,
     is_traced,
+    refuse_multi_dof,
     result_dtype,
     safe_norm,
 )
@@ -405,6 +406,7 @@ def resolved_rate_control(
     """
     fn = "jk.resolved_rate_control"
     hint = f"jax.vmap(lambda q0: {fn}(robot, q0, T_path, dt))(q0s), one run per start"
+    refuse_multi_dof(robot, fn, "integrates q + qd dt in a vector space")
     q0 = check_q(robot, q0, what="q0", fn=fn, batch_hint=hint)
     dtype = result_dtype(robot, q0)
     Ts = jnp.asarray(T_path, dtype=dtype)

@@ -1,6 +1,9 @@
 """Jacobians: the hand-built geometric Jacobian (Table 4.1) and the autodiff ones.
 
-Rows are always ``[v; omega]`` (linear first); columns follow ``q`` (``robot.joint_names``).
+Rows are always ``[v; omega]`` (linear first); columns follow the velocity ``v``
+(``robot.velocity_names``: the entries of ``q``, ``robot.joint_names``, unless the robot has free,
+ball or planar joints, whose columns are those of their velocity coordinates: see
+:mod:`jaxkin.configuration`). Every Jacobian has ``robot.nv`` columns.
 ``reference`` says which point's velocity the linear rows give and in which basis:
 
 ==================  =====================================  ======================================
@@ -37,6 +40,7 @@ from ._checks import (
     result_dtype,
 )
 from ._jit import eager
+from .configuration import integrate_kernel
 from .errors import JaxkinError, ShapeError
 from .kinematics import frame_pose, scalar_pass, scan_pass, uses_scan
 from .model import Robot
@@ -62,22 +66,29 @@ __all__ = [
 
 
 def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
-    """Table 4.1 as scalars: per q entry the linear and angular column at world point ``target``.
+    """Table 4.1 as scalars: per entry of ``v`` the linear and angular column at world point
+    ``target``.
 
     A revolute joint i contributes ``[z_i x (target - o_i); z_i]``, a prismatic one ``[z_i; 0]``
     (times its multiplier, summed over joints sharing a q entry); joints off the path give zeros.
+    A free joint gives six columns: with ``a_k`` the child frame's axes in world coordinates and
+    ``c`` its origin, ``[a_k; 0]`` (k = x, y, z) then ``[a_k x (target - c); a_k]``; a ball joint
+    the three angular ones, a planar joint the linear x, y and the angular z one.
     """
     zero = (0.0, 0.0, 0.0)
-    Jv = [zero] * robot.dof
-    Jw = [zero] * robot.dof
+    Jv = [zero] * robot.nv
+    Jw = [zero] * robot.nv
     path = robot.ancestors(frame)
     mult = _multipliers(robot, path)
     for j in path:
         kind = robot.kinds[j]
         if kind == "fixed":
             continue
+        if kind in ("free", "ball", "planar"):
+            _multi_dof_columns(kind, sp, j, robot.v_index[j], target, Jv, Jw)
+            continue
         z = sp.z[j]
-        qi = robot.q_index[j]
+        qi = robot.v_index[j]
         if kind == "revolute":
             jv, jw = fold.cross(z, fold.vsub(target, sp.o[j])), z
         else:
@@ -86,6 +97,23 @@ def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
         Jv[qi] = fold.vadd(Jv[qi], fold.vscale(jv, m))
         Jw[qi] = fold.vadd(Jw[qi], fold.vscale(jw, m))
     return Jv, Jw
+
+
+def _multi_dof_columns(kind: str, sp, j: int, vi: int, target, Jv: list, Jw: list) -> None:
+    """The columns of free, ball or planar joint ``j`` (its velocity in child axes)."""
+    zero = (0.0, 0.0, 0.0)
+    R, c = sp.R[j + 1], sp.p[j + 1]  # the child frame (placement robots: no A after the motion)
+    axes = [tuple(R[i][k] for i in range(3)) for k in range(3)]  # columns of R
+    arm = fold.vsub(target, c)
+    linear = {"free": (0, 1, 2), "ball": (), "planar": (0, 1)}[kind]
+    angular = {"free": (0, 1, 2), "ball": (0, 1, 2), "planar": (2,)}[kind]
+    col = vi
+    for k in linear:
+        Jv[col], Jw[col] = axes[k], zero
+        col += 1
+    for k in angular:
+        Jv[col], Jw[col] = fold.cross(axes[k], arm), axes[k]
+        col += 1
 
 
 def _multipliers(robot: Robot, joints) -> dict:
@@ -100,7 +128,7 @@ ZERO_COLUMNS = 16
 
 
 def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
-    """(6, dof) array from per-column 3-vectors of scalars.
+    """(6, nv) array from per-column 3-vectors of scalars.
 
     With at least ``ZERO_COLUMNS`` all-zero constant columns (joints off the frame's path in a
     large tree) the other columns are scattered into a zeros block instead of stacking one
@@ -130,16 +158,18 @@ def geometric_jacobian(
     point: Any = None,
     reference: str = "world_aligned",
 ) -> jax.Array:
-    """Geometric Jacobian ``J(q)`` with ``[v; omega] = J(q) @ qd``; shape (6, dof).
+    """Geometric Jacobian ``J(q)`` with ``[v; omega] = J(q) @ qd``; shape (6, nv).
 
     Built column by column from one forward pass (the chapter's Table 4.1): a revolute joint i
     contributes ``[z_i x (p - o_i); z_i]``, a prismatic one ``[z_i; 0]``, a joint not on the path
-    to ``frame`` a zero column. Elementwise, with the model's constants folded when the robot is
-    concrete (see :func:`jaxkin.kinematics.scalar_pass`).
+    to ``frame`` a zero column. A free, ball or planar joint contributes one column per entry of
+    its velocity (child-frame axes, :mod:`jaxkin.configuration`), so ``qd`` is a velocity of
+    shape (nv,), not a time derivative of ``q``. Elementwise, with the model's constants folded
+    when the robot is concrete (see :func:`jaxkin.kinematics.scalar_pass`).
 
     Args:
       robot: the robot.
-      q: joint values, shape (dof,).
+      q: joint values, shape (nq,).
       frame: frame name or index (default: the tip, tool included).
       point: optional offset (3,) of the point of interest from the frame origin, in the frame's
         own axes; the linear rows then give that point's velocity.
@@ -173,7 +203,7 @@ def frame_jacobian(
     point: Any = None,
     reference: str = "world_aligned",
 ) -> tuple[jax.Array, jax.Array]:
-    """``(J, T)``: the geometric Jacobian (6, dof) of :func:`geometric_jacobian` and the frame's
+    """``(J, T)``: the geometric Jacobian (6, nv) of :func:`geometric_jacobian` and the frame's
     pose ``T_world_frame`` (4, 4) (its origin, not ``point``), from one forward pass.
 
     For solvers and controllers that need both at every step (IK, resolved-rate control,
@@ -280,8 +310,8 @@ def _jacobian_pass_scan(robot: Robot, q, f: int, point, reference: str) -> Frame
     cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (n, 3)
     cols_w = mult * rev * fp.z
     qidx = np.maximum(np.array(robot.q_index), 0)
-    Jv = jnp.zeros((robot.dof, 3), dtype=dtype).at[qidx].add(cols_v).T
-    Jw = jnp.zeros((robot.dof, 3), dtype=dtype).at[qidx].add(cols_w).T
+    Jv = jnp.zeros((robot.nv, 3), dtype=dtype).at[qidx].add(cols_v).T
+    Jw = jnp.zeros((robot.nv, 3), dtype=dtype).at[qidx].add(cols_w).T
     if reference == "local":
         Jv, Jw = R.T @ Jv, R.T @ Jw
     elif reference == "world":
@@ -349,16 +379,23 @@ def _autodiff_jacobian(robot, q, frame, point, reference, mode, fn):
 def _autodiff_kernel(robot, f, reference, mode, q, pt):
     pose = _pose_twist_fn(robot, f, pt, reference)
     jac = jax.jacfwd if mode == "fwd" else jax.jacrev
-    dp, dR = jac(pose)(q.astype(result_dtype(robot, q)))
+    q = q.astype(result_dtype(robot, q))
+    if robot.nq == robot.nv:
+        dp, dR = jac(pose)(q)
+    else:  # differentiate along the configuration manifold: v -> pose(integrate(q, v)) at 0
+        v0 = jnp.zeros(robot.nv, q.dtype)
+        dp, dR = jac(lambda v: pose(integrate_kernel(robot, q, v)))(v0)
     p, R = pose(q.astype(dp.dtype))
     return _jacobian_from_derivs(p, R, dp, dR, reference)
 
 
 def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
-    """The geometric Jacobian from ``jax.jacfwd`` of forward kinematics; shape (6, dof).
+    """The geometric Jacobian from ``jax.jacfwd`` of forward kinematics; shape (6, nv).
 
     Linear rows are d(point)/dq; angular rows are ``vee(dR/dq_k R^T)``. Independent of the
-    hand-built Table 4.1 assembly, so the two check each other.
+    hand-built Table 4.1 assembly, so the two check each other. For a robot with free, ball or
+    planar joints the derivative is taken with respect to ``v`` of
+    ``fk(jaxkin.integrate(robot, q, v))`` at ``v = 0`` (:mod:`jaxkin.configuration`).
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("puma560")
@@ -370,7 +407,7 @@ def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") ->
 
 
 def jacobian_rev(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
-    """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, dof).
+    """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, nv).
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("puma560")
@@ -392,11 +429,13 @@ def analytical_jacobian(
     singular_tol: float | None = None,
     return_margin: bool = False,
 ):
-    """Analytical Jacobian ``d[p; phi]/dq``; shape (6, dof).
+    """Analytical Jacobian ``d[p; phi]/dq``; shape (6, nv).
 
     ``p`` is the frame origin (or ``point``, an offset in the frame's axes) in world coordinates,
     ``phi`` the frame's orientation in world coordinates in ``representation`` (``"rpy"``, the
-    chapter's; ``"zyz"``; ``"rotvec"``). Rows ``[dp; dphi]``, columns follow ``q``. It equals
+    chapter's; ``"zyz"``; ``"rotvec"``). Rows ``[dp; dphi]``, columns follow ``q`` (for a robot
+    with free, ball or planar joints: the velocity ``v``, the derivative being taken along
+    ``jaxkin.integrate(robot, q, v)`` at ``v = 0``). It equals
     ``blkdiag(I, B(phi)^-1) @ geometric_jacobian(...)`` (see
     :func:`jaxkin.representations.analytical_from_geometric`).
 
@@ -457,7 +496,7 @@ def analytical_jacobian_pass(
     representation: str,
     method: str = "chain",
 ) -> tuple[jax.Array, jax.Array]:
-    """The kernel of :func:`analytical_jacobian` on checked arguments: ``(J_a (6, dof), margin)``,
+    """The kernel of :func:`analytical_jacobian` on checked arguments: ``(J_a (6, nv), margin)``,
     unmasked (see :func:`jacobian_pass` for the arguments)."""
     pt = point
     dtype = result_dtype(robot, q)
@@ -489,5 +528,11 @@ def analytical_jacobian_pass(
             phi = to_phi(R)
             return jnp.concatenate([p, phi]), phi
 
-        Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(q.astype(dtype))
+        if robot.nq == robot.nv:
+            Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(q.astype(dtype))
+        else:
+            qq = q.astype(dtype)
+            Ja, phi = jax.jacfwd(lambda v: x_of_q(integrate_kernel(robot, qq, v)), has_aux=True)(
+                jnp.zeros(robot.nv, dtype)
+            )
     return Ja, representation_margin(phi, representation)

@@ -2,7 +2,12 @@
 
 All poses are in the world frame (the frame ``robot.base`` is expressed in; the robot's base frame
 when ``base`` is None): ``T_world_frame``, shape (4, 4). Kernels take one configuration ``q`` of
-shape ``(dof,)``; batch with ``jax.vmap``.
+shape ``(nq,)``; batch with ``jax.vmap``.
+
+Free and ball joints' quaternions (and planar joints' (cos, sin) pairs) are normalised inside the
+kernel, as MuJoCo's ``mj_kinematics`` does: any nonzero quaternion is the rotation of its unit
+multiple. A zero or non-finite one raises eagerly (:func:`jaxkin._checks.check_q`) and gives NaN
+under ``jit``/``vmap``.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from . import _fold as fold
 from . import spatial
 from ._checks import check_q, is_traced, result_dtype
 from ._jit import eager
-from .model import Robot
+from .model import JOINT_SIZES, Robot
 from .placements import joint_placements
 
 __all__ = [
@@ -152,6 +157,38 @@ def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
     return {j: (c[i], s[i]) for i, j in enumerate(keys)}
 
 
+_MULTI = ("free", "ball", "planar")
+
+
+def quaternion_rotation(w, x, y, z) -> tuple:
+    """The rotation (nested tuples) of the quaternion ``(w, x, y, z)`` divided by its norm:
+    ``I + 2 / |q|^2 (w [v]x + [v]x^2)``, so a non-unit quaternion gives the rotation of its unit
+    multiple and the zero quaternion gives NaN."""
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    return (
+        (1.0 - (yy + zz), xy - wz, xz + wy),
+        (xy + wz, 1.0 - (xx + zz), yz - wx),
+        (xz - wy, yz + wx, 1.0 - (xx + yy)),
+    )
+
+
+def joint_motion(kind: str, coords: list) -> tuple:
+    """``(R, t)`` of a free, ball or planar joint's motion (child frame in the joint frame) from
+    its coordinates (see :mod:`jaxkin.configuration`); ``t`` is None for a ball joint."""
+    if kind == "free":
+        return quaternion_rotation(*coords[3:]), tuple(coords[:3])
+    if kind == "ball":
+        return quaternion_rotation(*coords), None
+    x, y, c, s = coords
+    inv = jax.lax.rsqrt(c * c + s * s)
+    c, s = c * inv, s * inv
+    return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)), (x, y, 0.0)
+
+
 class ScalarPass(NamedTuple):
     """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`.
 
@@ -187,7 +224,14 @@ def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
     n = robot.n_joints
     joints = list(range(n)) if frames is None else path_joints(robot, frames)
     K = _constants(robot, dtype, None if frames is None else joints)
-    used = sorted({robot.q_index[j] for j in joints if robot.kinds[j] != "fixed"})
+    used = sorted(
+        {
+            robot.q_index[j] + k
+            for j in joints
+            if robot.kinds[j] != "fixed"
+            for k in range(JOINT_SIZES[robot.kinds[j]][0])
+        }
+    )
     qv = {i: q[i] for i in used}
     trig = _joint_trig(robot, K, qv, joints)
     Rs: list = [None] * robot.n_frames
@@ -205,7 +249,12 @@ def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
         z = fold.matvec(R, K.axis[j])
         zs[j] = z
         os[j] = p
-        if kind != "fixed":
+        if kind in _MULTI:
+            M, t = joint_motion(kind, [qv[qi + k] for k in range(JOINT_SIZES[kind][0])])
+            if t is not None:
+                p = fold.vadd(p, fold.matvec(R, t))
+            R = fold.matmul(R, M)
+        elif kind != "fixed":
             value = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
             if kind == "revolute":
                 M = fold.rotation_about(K.axis[j], *trig[j])
@@ -243,8 +292,13 @@ SCAN_MIN_JOINTS = 32
 
 
 def uses_scan(robot: Robot) -> bool:
-    """Long serial chains run through ``lax.scan`` (compile time independent of length)."""
-    return robot.n_joints >= SCAN_MIN_JOINTS and robot.parents == tuple(range(robot.n_joints))
+    """Long serial chains of revolute, prismatic and fixed joints run through ``lax.scan``
+    (compile time independent of length); a robot with a free, ball or planar joint never does."""
+    return (
+        robot.n_joints >= SCAN_MIN_JOINTS
+        and robot.parents == tuple(range(robot.n_joints))
+        and not robot.multi_dof_joints
+    )
 
 
 def scan_pass(robot: Robot, q: jax.Array) -> ForwardPass:

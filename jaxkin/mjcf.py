@@ -20,8 +20,12 @@ What becomes what
   root frame ``world`` (or the body given as ``base=``). A body without joints is welded to its
   parent (a fixed joint); mocap bodies are fixed at their model pose.
 * ``hinge`` -> revolute, ``slide`` -> prismatic, with MuJoCo's axis and limits (``range`` where
-  ``limited``; unbounded otherwise). A joint whose anchor (``pos``) is not the body origin, and
-  every joint but the last of a body with several joints, gets a frame of its own at its anchor,
+  ``limited``; unbounded otherwise). ``free`` -> free and ``ball`` -> ball joints
+  (:mod:`jaxkin.configuration`): ``q`` holds their ``qpos`` as MuJoCo does (free: the body's
+  position in the world, then its unit quaternion ``(qw, qx, qy, qz)``; ball: the quaternion of
+  the rotation about the joint's anchor); a ball joint's ``range`` (a cone) is not kept. A
+  joint whose anchor (``pos``) is not the body origin, and every joint but the last of a body with
+  several joints, gets a frame of its own at its anchor,
   named after the joint (``joint:<name>`` when a body already has that name): MuJoCo applies a
   body's joints one after the other in the body's (moving) frame, and so does the chain of
   frames, ending at the body's frame.
@@ -34,17 +38,22 @@ What becomes what
 * ``connect``, ``weld`` and other equality constraints between bodies are not kinematic
   couplings of the tree: like ``mj_kinematics``, jaxkin computes the open tree and ignores them.
   Tendons used by actuators and sensors are ignored too.
-* Refused by name, with a :class:`MJCFError` (a :class:`jaxkin.ModelError`): ``free`` and
-  ``ball`` joints (load the part below with ``base=<its body>``), ``joint`` equalities with a
-  non-linear polynomial, without ``joint2`` or a second equality on the same joint, and tendon
-  equalities coupling joints of the loaded part.
+* Refused by name, with a :class:`MJCFError` (a :class:`jaxkin.ModelError`): ``joint``
+  equalities with a non-linear polynomial, without ``joint2`` or a second equality on the
+  same joint, and tendon equalities coupling joints of the loaded part.
 
 ``q`` and ``qpos``
 ------------------
-``q`` is MuJoCo's ``qpos`` of the loaded hinge and slide joints, in MuJoCo's order, without the
-mimic (coupled) joints: the same numbers, including MuJoCo's ``ref`` convention (a joint at
-``qpos = ref`` is at the pose the file draws; jaxkin folds ``-ref`` into the joint's placement,
-so ``q = qpos`` exactly, and ``robot.lower``/``robot.upper`` are ``jnt_range``).
+``q`` is MuJoCo's ``qpos`` of the loaded joints, in MuJoCo's order, without the mimic (coupled)
+joints: the same numbers, including MuJoCo's ``ref`` convention (a joint at ``qpos = ref`` is at
+the pose the file draws; jaxkin folds ``-ref`` into the joint's placement, so ``q = qpos``
+exactly, and ``robot.lower``/``robot.upper`` are ``jnt_range``).
+
+Velocities differ for free joints only: jaxkin's velocity ``v`` (and the Jacobian's columns)
+follows Pinocchio, the free joint's linear velocity in the body's own axes, where MuJoCo's
+``qvel`` gives it in the world's: ``v[:3] = R.T @ qvel[:3]`` with ``R`` the body's orientation
+(``v[3:6] = qvel[3:6]``, the angular velocity in body axes for both; ball joints agree too). So
+``mj_jac``'s three linear columns of a free joint equal jaxkin's times ``R.T``.
 
 The default frame of an MJCF model
 ----------------------------------
@@ -202,38 +211,35 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
     for k, j in enumerate(range(adr, adr + num)):
         jtype = _JOINT_TYPES[int(m.jnt_type[j])]
         spec: dict[str, Any] = dict(name=joints[j], parent=parent)
-        if jtype in ("free", "ball"):
-            spec["refused"] = MJCFError(
-                f"{label}: joint {joints[j]!r} of body {bodies[b]!r} is a {jtype} joint "
-                f"({'6-DOF free motion' if jtype == 'free' else '3-DOF rotation'}); jaxkin "
-                "models hinge and slide joints only, and does not weld it silently. Load what "
-                f"hangs below it with base={bodies[b]!r} (poses are then relative to that "
-                "body), or change its type in the file.",
-                file=label,
-                element=f"<joint name={joints[j]!r} type={jtype!r}>",
-            )
-            jtype = "hinge"  # placeholder, never built
         axis = np.array(m.jnt_axis[j], dtype=float)
-        ref = float(m.qpos0[m.jnt_qposadr[j]])
-        anchor = np.array(m.jnt_pos[j], dtype=float) if jtype == "hinge" else np.zeros(3)
-        if jtype == "hinge":  # Rot(axis, qpos - ref) = Rot(axis, -ref) Rot(axis, qpos)
+        anchor = np.array(m.jnt_pos[j], dtype=float) if jtype in ("hinge", "ball") else np.zeros(3)
+        if jtype == "free":  # qpos is the body's pose in its parent (the world): body_pos unused
+            T = np.eye(4)
+        elif jtype == "ball":  # qpos is the rotation about the anchor (MuJoCo ignores ref)
+            T = T @ homogeneous(None, anchor)
+        elif jtype == "hinge":  # Rot(axis, qpos - ref) = Rot(axis, -ref) Rot(axis, qpos)
+            ref = float(m.qpos0[m.jnt_qposadr[j]])
             T = T @ homogeneous(axis_rotation(axis, -ref), anchor)
         else:  # Trans(axis (qpos - ref)) = Trans(-ref axis) Trans(axis qpos)
+            ref = float(m.qpos0[m.jnt_qposadr[j]])
             T = T @ homogeneous(None, -ref * axis)
         # Its own frame at the anchor, unless it is the body's last joint and sits at its origin.
         last, at_origin = k == num - 1, not np.any(anchor != 0.0)
         child = bodies[b] if last and at_origin else frame_name(joints[j])
-        lo, hi = (-math.inf, math.inf)
-        if m.jnt_limited[j]:
-            lo, hi = (float(v) for v in m.jnt_range[j])
-        spec.update(
-            type="revolute" if jtype == "hinge" else "prismatic",
-            child=child,
-            transform=T,
-            axis=axis,
-            lower=lo,
-            upper=hi,
-        )
+        if jtype in ("free", "ball"):
+            spec.update(type=jtype, child=child, transform=T)
+        else:
+            lo, hi = (-math.inf, math.inf)
+            if m.jnt_limited[j]:
+                lo, hi = (float(v) for v in m.jnt_range[j])
+            spec.update(
+                type="revolute" if jtype == "hinge" else "prismatic",
+                child=child,
+                transform=T,
+                axis=axis,
+                lower=lo,
+                upper=hi,
+            )
         specs.append(spec)
         parent = child
         T = homogeneous(None, -anchor)
@@ -411,13 +417,14 @@ def load_mjcf(
       name: the robot's name (default: ``<mujoco model=...>``).
 
     Returns:
-      A placement robot whose ``q`` is MuJoCo's ``qpos`` of its hinge and slide joints (coupled
-      joints left out) and whose frames are the bodies, joint anchors and sites; poses and
-      Jacobians in the world frame of MuJoCo (``T_world_frame``; rows ``[v; omega]``).
+      A placement robot whose ``q`` is MuJoCo's ``qpos`` of its joints (coupled joints left
+      out; see "``q`` and ``qpos``" for the velocity of free joints) and whose frames are the
+      bodies, joint anchors and sites; poses and Jacobians in the world frame of MuJoCo
+      (``T_world_frame``; rows ``[v; omega]``).
 
     Raises:
-      MJCFError: MuJoCo rejects the file, or it holds what jaxkin cannot represent (free and
-        ball joints, non-linear couplings, ...), named.
+      MJCFError: MuJoCo rejects the file, or it holds what jaxkin cannot represent
+        (non-linear couplings, ...), named.
       MJCFDependencyError: MuJoCo is not installed (``pip install 'jaxkin[mjcf]'``).
 
     >>> import jaxkin as jk
@@ -442,13 +449,10 @@ def load_mjcf(
     if base is not None and base not in body_names:
         _select(specs, parent_of, base, None, label, body_names)  # raises, naming base
     chosen = _select(specs, parent_of, root, tip, label, ["world", *parent_of])
-    for s in chosen:
-        if "refused" in s:
-            raise s["refused"]
     selected = {s["name"] for s in chosen if s["type"] != "fixed"}
     mimic = _couplings(mujoco, m, label, selected, joint_names)
     leaders: dict[str, dict[str, Any]] = {}
-    all_moving = {s["name"]: s for s in specs if s["type"] != "fixed" and "refused" not in s}
+    all_moving = {s["name"]: s for s in specs if s["type"] in ("revolute", "prismatic")}
     for s in chosen:
         if s["name"] in mimic:
             s["mimic"] = mimic[s["name"]]
@@ -456,7 +460,7 @@ def load_mjcf(
             if lead not in selected and lead in all_moving:
                 src = all_moving[lead]
                 leaders[lead] = {k: src[k] for k in ("name", "type", "lower", "upper")}
-    out = [{k: v for k, v in s.items() if k != "refused"} for s in chosen]
+    out = [dict(s) for s in chosen]
     try:
         return Robot.from_joints(
             out,

@@ -6,12 +6,18 @@ Each joint's motion is
 
     T_parent_child(q) = B_j @ Motion(axis_j, multiplier_j * q[q_index_j] + offset_j) @ A_j
 
-where ``B_j`` and ``A_j`` are constant placements built from the joint's parameters. Which of them
+for a revolute or prismatic joint (a fixed joint has no motion), where ``B_j`` and ``A_j`` are
+constant placements built from the joint's parameters. Which of them
 is used is fixed by the model's parameterisation (static):
 
 * ``"dh_standard"`` (Spong): ``A_j = Rz(theta) Tz(d) Tx(a) Rx(alpha)``, ``B_j = I``, axis = z;
 * ``"dh_modified"`` (Craig): ``B_j = Rx(alpha) Tx(a) Rz(theta) Tz(d)``, ``A_j = I``, axis = z;
 * ``"placement"`` (URDF-like): ``B_j = Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)``, ``A_j = I``.
+
+Free, ball and planar joints (placement robots only) take several entries of ``q`` and of the
+velocity ``v``: ``Motion`` is then the rigid motion their coordinates give (see
+:mod:`jaxkin.configuration`), and ``robot.nq`` (the length of ``q``) exceeds ``robot.nv`` (the
+length of ``v``, the number of Jacobian columns). For every other robot ``nq == nv == dof``.
 
 Topology (joint kinds, parent indices, names, which q entry drives which joint) is static and
 hashable; every number (DH parameters or placements, axes, offsets, multipliers, limits, base and
@@ -33,9 +39,36 @@ import numpy as np
 
 from .errors import ModelError, NoDefaultFrameError
 
-__all__ = ["JOINT_KINDS", "PARAMETERISATIONS", "NoDefaultFrameError", "Params", "Robot"]
+__all__ = [
+    "COORDINATES",
+    "JOINT_KINDS",
+    "JOINT_SIZES",
+    "PARAMETERISATIONS",
+    "NoDefaultFrameError",
+    "Params",
+    "Robot",
+]
 
-JOINT_KINDS = ("revolute", "prismatic", "fixed")
+JOINT_KINDS = ("revolute", "prismatic", "fixed", "free", "ball", "planar")
+
+JOINT_SIZES = {
+    "revolute": (1, 1),
+    "prismatic": (1, 1),
+    "fixed": (0, 0),
+    "free": (7, 6),
+    "ball": (4, 3),
+    "planar": (4, 3),
+}
+"""``(nq, nv)`` of each joint kind: how many entries of the configuration ``q`` and of the
+velocity ``v`` it takes (see :mod:`jaxkin.configuration` for the coordinates)."""
+
+COORDINATES = {
+    "free": (("x", "y", "z", "qw", "qx", "qy", "qz"), ("vx", "vy", "vz", "wx", "wy", "wz")),
+    "ball": (("qw", "qx", "qy", "qz"), ("wx", "wy", "wz")),
+    "planar": (("x", "y", "cos", "sin"), ("vx", "vy", "wz")),
+}
+"""Names of the ``q`` and ``v`` entries of each multi-coordinate joint kind: the entries of joint
+``j`` are named ``f"{j}.{coordinate}"`` in ``joint_names`` and ``velocity_names``."""
 PARAMETERISATIONS = ("dh_standard", "dh_modified", "placement")
 
 
@@ -96,13 +129,17 @@ class Robot:
     :func:`jaxkin.robots.load`; do not call the constructor directly.
 
     Attributes (static): ``name``, ``parameterisation``, ``kinds`` (per joint), ``parents`` (per
-    joint, index of the parent frame), ``q_index`` (per joint, index into ``q`` or -1 for fixed),
-    ``joint_names`` (one per entry of ``q``), ``frame_names`` (``fk_all``'s order, base first),
-    ``has_tool``, ``configurations`` (named joint vectors), ``default_frames`` (which frame
+    joint, index of the parent frame), ``q_index`` (per joint, start index into ``q`` or -1 for
+    fixed), ``v_index`` (per joint, start index into the velocity ``v`` and the Jacobian's
+    columns, or -1 for fixed; equal to ``q_index`` unless the robot has free, ball or planar
+    joints), ``joint_names`` (one per entry of ``q``; the entries of a free, ball or planar
+    joint ``j`` are ``"j.x"``, ``"j.qw"`` ..., see :data:`COORDINATES`), ``frame_names``
+    (``fk_all``'s order, base first), ``has_tool``, ``configurations`` (named joint vectors),
+    ``default_frames`` (which frame
     ``frame=None`` means: see :attr:`tip_frame`).
 
     Attributes (float leaves): ``params`` (read-only mapping of per-joint parameter arrays),
-    ``axis`` (n, 3), ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (dof,), ``base``
+    ``axis`` (n, 3), ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (nq,), ``base``
     (4, 4) = T_world_base, ``tool`` (4, 4) = T_flange_tool.
 
     A robot is a value: its attributes cannot be assigned, :meth:`replace` returns an independent
@@ -123,6 +160,7 @@ class Robot:
     kinds: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
     parents: tuple[int, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
     q_index: tuple[int, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
+    v_index: tuple[int, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
     joint_names: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
     frame_names: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
     has_tool: bool = dataclasses.field(default=False, metadata=_STRUCTURE)
@@ -132,6 +170,8 @@ class Robot:
     default_frames: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
 
     def __post_init__(self) -> None:
+        if not self.v_index and all(JOINT_SIZES[k][0] <= 1 for k in self.kinds):
+            object.__setattr__(self, "v_index", tuple(self.q_index))
         if not isinstance(self.params, Params):
             object.__setattr__(self, "params", Params(self.params))
         for f in _LEAVES:
@@ -188,8 +228,56 @@ class Robot:
     # ------------------------------------------------------------------ info
     @property
     def dof(self) -> int:
-        """Number of independent joint variables (length of ``q``)."""
+        """Number of independent joint variables: :attr:`nv`, the number of degrees of freedom
+        (the Jacobian's columns). Equal to :attr:`nq`, the length of ``q``, unless the robot has
+        free, ball or planar joints."""
+        return self.nv
+
+    @property
+    def nq(self) -> int:
+        """Length of a configuration ``q`` (a unit quaternion counts 4, a planar angle 2)."""
         return len(self.joint_names)
+
+    @property
+    def nv(self) -> int:
+        """Length of a velocity ``v``/``qd`` and number of Jacobian columns (a free joint counts
+        6, a ball or planar joint 3)."""
+        nv = self.__dict__.get("_nv")
+        if nv is None:
+            nv = max(
+                (
+                    i + JOINT_SIZES[k][1]
+                    for k, i in zip(self.kinds, self.v_index, strict=True)
+                    if i >= 0
+                ),
+                default=0,
+            )
+            object.__setattr__(self, "_nv", nv)
+        return nv
+
+    @property
+    def multi_dof_joints(self) -> tuple[int, ...]:
+        """Indices of the free, ball and planar joints (empty for most arms)."""
+        return tuple(j for j, k in enumerate(self.kinds) if k in COORDINATES)
+
+    @property
+    def velocity_names(self) -> tuple[str, ...]:
+        """One name per entry of the velocity ``v`` (the Jacobian's columns): ``joint_names`` for
+        revolute and prismatic joints, ``"j.vx"`` ... ``"j.wz"`` for a free, ball or planar joint
+        ``j`` (see :data:`COORDINATES`)."""
+        if self.nq == self.nv:
+            return self.joint_names
+        out = [""] * self.nv
+        for k, qi, vi in zip(self.kinds, self.q_index, self.v_index, strict=True):
+            if qi < 0 or out[vi]:
+                continue
+            if k in COORDINATES:
+                stem = self.joint_names[qi].rsplit(".", 1)[0]
+                for i, c in enumerate(COORDINATES[k][1]):
+                    out[vi + i] = f"{stem}.{c}"
+            else:
+                out[vi] = self.joint_names[qi]
+        return tuple(out)
 
     @property
     def n_joints(self) -> int:
@@ -270,16 +358,18 @@ class Robot:
 
     @property
     def joint_kinds(self) -> tuple[str, ...]:
-        """Kind of the joint driven by each entry of ``q`` ("revolute" or "prismatic")."""
-        out = [""] * self.dof
+        """Kind of the joint driven by each entry of ``q`` ("revolute", "prismatic", or "free",
+        "ball", "planar" for each entry of such a joint)."""
+        out = [""] * self.nq
         for j, i in enumerate(self.q_index):
             if i >= 0 and not out[i]:
-                out[i] = self.kinds[j]
+                for k in range(JOINT_SIZES[self.kinds[j]][0]):
+                    out[i + k] = self.kinds[j]
         return tuple(out)
 
     @property
     def configurations(self) -> dict[str, np.ndarray]:
-        """Named joint configurations (e.g. ``"home"``), as numpy arrays of shape (dof,)."""
+        """Named joint configurations (e.g. ``"home"``), as numpy arrays of shape (nq,)."""
         return {k: np.asarray(v, dtype=self.dtype) for k, v in self.configurations_}
 
     def frame_index(self, frame: int | str | None) -> int:
@@ -319,7 +409,9 @@ class Robot:
 
     def __repr__(self) -> str:
         return (
-            f"Robot(name={self.name!r}, dof={self.dof}, parameterisation={self.parameterisation!r},"
+            f"Robot(name={self.name!r}, dof={self.dof}, "
+            + (f"nq={self.nq}, " if self.nq != self.nv else "")
+            + f"parameterisation={self.parameterisation!r},"
             f" joints={list(self.joint_names)}, dtype={self.dtype})"
         )
 
@@ -338,13 +430,13 @@ class Robot:
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dt), self)
 
     def with_configurations(self, **named: Sequence[float]) -> Robot:
-        """A copy with extra named configurations, each of length ``dof``."""
+        """A copy with extra named configurations, each of length ``nq``."""
         items = dict(self.configurations_)
         for k, v in named.items():
             arr = np.asarray(v, dtype=float).reshape(-1)
-            if arr.shape != (self.dof,) or not np.all(np.isfinite(arr)):
+            if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
                 raise ModelError(
-                    f"configuration {k!r} must be {self.dof} finite joint values, got {v!r}."
+                    f"configuration {k!r} must be {self.nq} finite joint values, got {v!r}."
                 )
             items[k] = tuple(float(x) for x in arr)
         return dataclasses.replace(self, configurations_=tuple(items.items()))

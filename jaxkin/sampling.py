@@ -8,6 +8,11 @@ finite box below, so a sample is always finite:
 * revolute joints: ``[-pi, pi]``; prismatic joints: ``[-1, 1]`` metre;
 * a joint bounded on one side only keeps that side and spans ``2 pi`` (or 2 m) from it, e.g.
   ``upper = -4`` with no lower limit gives ``[-4 - 2 pi, -4]``.
+
+Free, ball and planar joints (:mod:`jaxkin.configuration`) are sampled on their manifold: a
+uniformly distributed unit quaternion (a normalised Gaussian 4-vector) for free and ball
+joints, a uniform angle in ``[-pi, pi)`` as ``(cos, sin)`` for planar joints, and their
+translations (always unbounded) uniformly in ``[-1, 1]`` metre, the prismatic box above.
 """
 
 from __future__ import annotations
@@ -28,12 +33,19 @@ __all__ = ["UNBOUNDED_HALF_WIDTH", "UNBOUNDED_LIMIT", "sample_configurations", "
 UNBOUNDED_LIMIT = 1e6
 """A joint limit whose magnitude is at least this (radians or metres) counts as no limit."""
 
-UNBOUNDED_HALF_WIDTH = {"revolute": math.pi, "prismatic": 1.0}
-"""Half width of the sampled range of a joint with no limit on either side."""
+UNBOUNDED_HALF_WIDTH = {
+    "revolute": math.pi,
+    "prismatic": 1.0,
+    "free": 1.0,
+    "ball": 1.0,
+    "planar": 1.0,
+}
+"""Half width of the sampled range of a joint with no limit on either side (the entries of
+free, ball and planar joints: translations in metres; their rotation entries are in [-1, 1])."""
 
 
 def sampling_bounds(robot: Robot) -> tuple[Any, Any]:
-    """The finite box ``(lo, hi)``, each of shape (dof,), that configurations are drawn from: the
+    """The finite box ``(lo, hi)``, each of shape (nq,), that configurations are drawn from: the
     joint limits, with unbounded sides replaced as the module doc says.
 
     float64 numpy arrays for a concrete robot; JAX arrays of the robot's dtype when its leaves are
@@ -60,7 +72,10 @@ def sampling_bounds(robot: Robot) -> tuple[Any, Any]:
 
 
 def sample_configurations(robot: Robot, n: int, key: Any = 0, *, dtype: Any = None) -> jax.Array:
-    """``n`` joint configurations drawn uniformly from :func:`sampling_bounds`; shape (n, dof).
+    """``n`` joint configurations drawn uniformly from :func:`sampling_bounds`; shape (n, nq).
+
+    Free, ball and planar joints are drawn on their manifold (module doc): unit quaternions
+    uniform over rotations, planar angles uniform.
 
     Args:
       robot: the robot.
@@ -84,7 +99,33 @@ def sample_configurations(robot: Robot, n: int, key: Any = 0, *, dtype: Any = No
         key = jax.random.key(int(key))
     dt = np.dtype(robot.dtype if dtype is None else dtype)
     lo, hi = sampling_bounds(robot)
-    u = jax.random.uniform(key, (int(n), robot.dof), dtype=dt)
+    if robot.multi_dof_joints:
+        key, key_rot = jax.random.split(key)
+    u = jax.random.uniform(key, (int(n), robot.nq), dtype=dt)
     lo_, hi_ = jnp.asarray(lo, dtype=dt), jnp.asarray(hi, dtype=dt)
     # lo + (hi - lo) u can round past hi; clip so that bounded joints stay within their limits
-    return jnp.clip(lo_[None] + (hi_ - lo_)[None] * u, lo_[None], hi_[None])
+    qs = jnp.clip(lo_[None] + (hi_ - lo_)[None] * u, lo_[None], hi_[None])
+    if not robot.multi_dof_joints:
+        return qs
+    return _rotations(robot, qs, key_rot, dt)
+
+
+def _rotations(robot: Robot, qs: jax.Array, key: Any, dt: Any) -> jax.Array:
+    """``qs`` with the rotation entries of free, ball and planar joints drawn on their
+    manifold: uniform unit quaternions, uniform planar angles."""
+    seen: set = set()
+    for j in robot.multi_dof_joints:
+        kind, qi = robot.kinds[j], robot.q_index[j]
+        if qi in seen:
+            continue
+        seen.add(qi)
+        key, sub = jax.random.split(key)
+        if kind == "planar":
+            a = jax.random.uniform(sub, (qs.shape[0],), dt, -math.pi, math.pi)
+            qs = qs.at[:, qi + 2].set(jnp.cos(a)).at[:, qi + 3].set(jnp.sin(a))
+            continue
+        g = jax.random.normal(sub, (qs.shape[0], 4), dt)
+        g = g / jnp.linalg.norm(g, axis=1, keepdims=True)
+        start = qi + 3 if kind == "free" else qi
+        qs = qs.at[:, start : start + 4].set(g)
+    return qs

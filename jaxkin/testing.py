@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import check_q, result_dtype
+from ._checks import check_q, refuse_multi_dof, result_dtype
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
 from .kinematics import forward_pass
 from .model import Robot
@@ -225,15 +225,29 @@ def tree_robots(draw, min_joints: int = 1, max_joints: int = 10, dtype: Any = No
 
 
 def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.ndarray]:
-    """Joint vectors (dof,) within :func:`jaxkin.sampling_bounds` (the joint limits; unbounded
+    """Joint vectors (nq,) within :func:`jaxkin.sampling_bounds` (the joint limits; unbounded
     sides as :mod:`jaxkin.sampling` documents), ``margin`` (a fraction of each range) kept
-    clear of both ends."""
+    clear of both ends. Quaternions and planar (cos, sin) pairs are scaled to unit length (a
+    zero one becomes the identity)."""
     lo, hi = sampling_bounds(robot)
     elems = []
     for a, b in zip(lo, hi, strict=True):
         a, b = a + margin * (b - a), b - margin * (b - a)
         elems.append(st.floats(float(a), float(b), **_FINITE))
-    return st.tuples(*elems).map(lambda t: np.array(t, dtype=float))
+    rotations = []
+    for j in robot.multi_dof_joints:
+        qi = robot.q_index[j]
+        start, end = {"free": (3, 7), "ball": (0, 4), "planar": (2, 4)}[robot.kinds[j]]
+        rotations.append((qi + start, qi + end))
+
+    def to_manifold(t) -> np.ndarray:
+        q = np.array(t, dtype=float)
+        for a, b in rotations:
+            n = np.linalg.norm(q[a:b])
+            q[a:b] = q[a:b] / n if n > 1e-3 else np.eye(b - a)[0]
+        return q
+
+    return st.tuples(*elems).map(to_manifold)
 
 
 _ROWS = {"all": slice(0, 6), "translation": slice(0, 3), "rotation": slice(3, 6)}
@@ -258,7 +272,7 @@ def _generic_rank(robot: Robot, frame, rows: str, lo: np.ndarray, hi: np.ndarray
     rng = np.random.default_rng(0)
     rank = 0
     for _ in range(4):
-        q = jnp.asarray(lo + (hi - lo) * rng.random(robot.dof), dtype=dtype)
+        q = jnp.asarray(lo + (hi - lo) * rng.random(robot.nq), dtype=dtype)
         J = np.asarray(geometric_jacobian(robot, q, frame=frame))[_ROWS[rows]]
         s = np.linalg.svd(J, compute_uv=False)
         rank = max(rank, int(np.count_nonzero(s > 1e-9 * max(float(s[0]), 1e-300))))
@@ -296,6 +310,9 @@ def near_singular_configurations(
         raise ValueError(f"tol must be a number in (0, 1), got {tol!r}.")
     if rows not in _ROWS:
         raise ValueError(f"rows must be one of {tuple(_ROWS)}, got {rows!r}.")
+    refuse_multi_dof(
+        robot, "jaxkin.testing.near_singular_configurations", "takes Newton steps on q in a box"
+    )
     robot.frame_index(frame)  # validates frame now, not inside hypothesis
     dtype = jnp.result_type(float)
     lo, hi = sampling_bounds(robot)
@@ -378,9 +395,15 @@ def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
         R, p = fp.R[f], fp.p[f]
         return (p if pt is None else p + R @ pt), R
 
-    eye = jnp.eye(robot.dof, dtype=jnp.float64)
-    p_plus, R_plus = jax.vmap(pose)(q[None, :] + h * eye)
-    p_minus, R_minus = jax.vmap(pose)(q[None, :] - h * eye)
+    eye = jnp.eye(robot.nv, dtype=jnp.float64)
+    if robot.nq == robot.nv:
+        p_plus, R_plus = jax.vmap(pose)(q[None, :] + h * eye)
+        p_minus, R_minus = jax.vmap(pose)(q[None, :] - h * eye)
+    else:  # steps along the configuration manifold (free, ball, planar joints)
+        from .configuration import integrate_kernel
+
+        p_plus, R_plus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, h * e)))(eye)
+        p_minus, R_minus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, -h * e)))(eye)
     Jv = ((p_plus - p_minus) / (2 * h)).T
     Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus) / (2 * h)).T
     p0, R0 = pose(q)

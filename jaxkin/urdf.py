@@ -10,9 +10,15 @@ What is read, and how
 ---------------------
 * Joint types ``revolute`` (one DOF, limited), ``continuous`` (one DOF, unbounded: ``q`` is the
   angle itself, not Pinocchio's (cos, sin) pair), ``prismatic`` and ``fixed``. A fixed joint's
-  placement is kept as a frame named after its child link. ``floating`` and ``planar`` joints are
-  refused with an error naming the joint (never welded silently): load the part below one with
-  ``base=<its child link>``, or change its type in the file.
+  placement is kept as a frame named after its child link. ``floating`` joints become free joints
+  (``q`` entries ``x, y, z, qw, qx, qy, qz``, 6 velocity entries) and ``planar`` joints planar
+  ones (``x, y, cos, sin``; 3 velocity entries): see :mod:`jaxkin.configuration`. A planar joint
+  moves in the plane normal to its ``<axis>``; jaxkin takes that plane to be its joint frame's xy
+  plane, so an axis other than ``0 0 1`` is refused by name (Pinocchio ignores the axis and
+  uses the xy plane: rotate the joint's origin instead). Their limits are not read.
+* ``floating_base=True`` puts a free joint named ``root_joint`` above the root link, moving it
+  relative to a new base frame ``universe`` (Pinocchio's ``JointModelFreeFlyer`` root joint and
+  names), for humanoids and legged robots.
 * ``<origin xyz rpy>``: ``T_parent_joint = Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (URDF's fixed-
   axis roll-pitch-yaw); missing origin, xyz or rpy mean zero. The joint moves its child link,
   whose frame is the joint frame: ``T_parent_child(q) = T_parent_joint Motion(axis, value)``.
@@ -115,8 +121,15 @@ MAX_MAGNITUDE = 1e6
 overflow (or lose every digit of) the kinematics; joint limits are not capped."""
 
 MOVING_TYPES = ("revolute", "continuous", "prismatic")
-SUPPORTED_TYPES = (*MOVING_TYPES, "fixed")
-REFUSED_TYPES = ("floating", "planar")
+"""The one-DOF joint types (entries of ``q`` one for one)."""
+MULTI_DOF_TYPES = ("floating", "planar")
+"""Joint types with several coordinates (free and planar joints of :mod:`jaxkin.configuration`)."""
+SUPPORTED_TYPES = (*MOVING_TYPES, "fixed", *MULTI_DOF_TYPES)
+REFUSED_TYPES: tuple[str, ...] = ()
+ROOT_JOINT = "root_joint"
+"""The name of the free joint ``load_urdf(..., floating_base=True)`` adds (Pinocchio's)."""
+UNIVERSE = "universe"
+"""The name of the base frame above the root link with ``floating_base=True`` (Pinocchio's)."""
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _SHOW = 80  # characters of an offending value shown in a message
@@ -657,16 +670,16 @@ def _joint(ctx: _Context, elem: _Element) -> URDFJoint:
 
 
 def _joint_type(ctx: _Context, elem: _Element, owner: str) -> str:
-    """The ``type`` of a ``<joint>``: a supported or a refused (floating, planar) type."""
+    """The ``type`` of a ``<joint>``, one of :data:`SUPPORTED_TYPES`."""
     kind = elem.attrib.get("type")
-    if kind is None or kind not in (*SUPPORTED_TYPES, *REFUSED_TYPES):
+    if kind is None or kind not in SUPPORTED_TYPES:
         raise ctx.error(
             "unknown joint type." if kind is not None else "the joint has no type.",
             elem,
             element=owner,
             attribute="type",
             value=kind,
-            fix=f"use one of {', '.join(SUPPORTED_TYPES)} (floating and planar are refused).",
+            fix=f"use one of {', '.join(SUPPORTED_TYPES)}.",
         )
     return kind
 
@@ -742,7 +755,7 @@ def _joint_mimic(
     if mimic_el is None:
         return None
     where = f"<mimic> of joint {name!r}"
-    if kind in REFUSED_TYPES:
+    if kind in MULTI_DOF_TYPES:
         raise ctx.error(
             f"a {kind} joint cannot mimic another joint.",
             mimic_el,
@@ -1017,18 +1030,23 @@ def _select(
 
 
 def _refuse_unsupported(ctx: _Context, joints: list[URDFJoint]) -> None:
+    """Planar joints whose plane is not their joint frame's xy plane are refused by name."""
     for j in joints:
-        if j.type in REFUSED_TYPES:
-            dof = "6-DOF free motion" if j.type == "floating" else "3-DOF motion in a plane"
+        off = max(abs(a - b) for a, b in zip(j.axis, (0.0, 0.0, 1.0), strict=True))
+        if j.type == "planar" and off > 1e-12:
+            axis = " ".join(f"{a:g}" for a in j.axis)
             raise ctx.error(
-                f"joint {j.name!r} is {j.type} ({dof}); jaxkin models revolute, continuous, "
-                "prismatic and fixed joints only, and does not weld it silently.",
+                f"joint {j.name!r} is planar with axis {axis} (the normal of its plane; "
+                "1 0 0 when <axis> is missing); jaxkin's planar joint moves in the joint frame's "
+                "xy plane (axis 0 0 1), and does not silently move it in another plane "
+                "(Pinocchio ignores the axis).",
                 line=j.line,
                 element=f"<joint name={j.name!r}>",
-                attribute="type",
-                value=j.type,
-                fix=f"load what hangs below it with base={j.child!r} (poses are then relative "
-                f"to {j.child!r}), or change its type in the file (e.g. to fixed).",
+                attribute="axis",
+                value=axis,
+                fix="rotate the joint's <origin rpy> so that the plane's normal is its z axis and "
+                'write <axis xyz="0 0 1"/>, or load what hangs below it with '
+                f"base={j.child!r} (poses are then relative to {j.child!r}).",
             )
 
 
@@ -1041,6 +1059,7 @@ def load_urdf(
     dtype: Any = None,
     name: str | None = None,
     xacro_args: Mapping[str, Any] | None = None,
+    floating_base: bool = False,
 ) -> Robot:
     """Load a URDF as a :class:`~jaxkin.Robot` (a placement robot; see the module doc).
 
@@ -1056,6 +1075,12 @@ def load_urdf(
       xacro_args: ``name -> value`` of the file's ``<xacro:arg>`` (``xacro robot.urdf.xacro
         name:=value``). A path ending in ``.xacro`` (or any path given with ``xacro_args``) is
         first expanded with the ``xacro`` package (``pip install 'jaxkin[xacro]'``).
+      floating_base: add a free joint ``"root_joint"`` above the root link (``base`` when
+        given), moving it relative to a new base frame ``"universe"``, as Pinocchio's
+        ``buildModelFromUrdf(path, pin.JointModelFreeFlyer())``: ``q`` starts with the 7
+        entries ``root_joint.x`` ... ``root_joint.qz`` (position, then unit quaternion, scalar
+        first) and the velocity with 6 (the root link's twist in its own axes); see
+        :mod:`jaxkin.configuration`.
 
     Returns:
       A robot whose ``frame_names`` are the selected links (``base`` first, then depth-first,
@@ -1075,6 +1100,28 @@ def load_urdf(
     ctx = _Context(model.file)
     root, joints = _select(model, tip, base, ctx)
     _refuse_unsupported(ctx, joints)
+    if floating_base:
+        if UNIVERSE in model.link_names or ROOT_JOINT in model.joint_map:
+            clash = UNIVERSE if UNIVERSE in model.link_names else ROOT_JOINT
+            raise ctx.error(
+                f"floating_base=True adds a base frame {UNIVERSE!r} and a free joint "
+                f"{ROOT_JOINT!r}, but the file already has a link or joint named {clash!r}.",
+                fix="rename it in the file, or load without floating_base.",
+            )
+        free = URDFJoint(
+            name=ROOT_JOINT,
+            type="floating",
+            parent=UNIVERSE,
+            child=root,
+            xyz=(0.0, 0.0, 0.0),
+            rpy=(0.0, 0.0, 0.0),
+            axis=(1.0, 0.0, 0.0),
+            lower=math.nan,
+            upper=math.nan,
+            mimic=None,
+            line=None,
+        )
+        root, joints = UNIVERSE, [free, *joints]
     selected = {j.name for j in joints}
     specs = [_joint_spec(j) for j in joints]
     # Joints outside the selection that drive selected mimic joints, with their own mimics.
@@ -1166,9 +1213,13 @@ def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
         children.setdefault(j.child, [])
     moving_below = dict.fromkeys(children, False)  # a moving joint in the link's subtree
     for j in reversed(joints):  # children before parents
-        if j.type in MOVING_TYPES or moving_below[j.child]:
+        if j.type in MOVING_TYPES or j.type in MULTI_DOF_TYPES or moving_below[j.child]:
             moving_below[j.parent] = True
-    ends = [j for j in joints if j.type in MOVING_TYPES and not moving_below[j.child]]
+    ends = [
+        j
+        for j in joints
+        if (j.type in MOVING_TYPES or j.type in MULTI_DOF_TYPES) and not moving_below[j.child]
+    ]
 
     def end_frame(link: str) -> str:
         while len(children[link]) == 1:  # fixed joints only: no moving joint is below
@@ -1181,18 +1232,19 @@ def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
 
 
 def _joint_spec(j: URDFJoint) -> dict[str, Any]:
-    """The :func:`jaxkin.build.from_joints` spec of a URDF joint (continuous -> revolute)."""
+    """The :func:`jaxkin.build.from_joints` spec of a URDF joint (continuous -> revolute,
+    floating -> free)."""
+    kinds = {"fixed": "fixed", "prismatic": "prismatic", "floating": "free", "planar": "planar"}
     spec: dict[str, Any] = {
         "name": j.name,
-        "type": "fixed"
-        if j.type == "fixed"
-        else ("prismatic" if j.type == "prismatic" else "revolute"),
+        "type": kinds.get(j.type, "revolute"),
         "parent": j.parent,
         "child": j.child,
         "xyz": j.xyz,
         "rpy": j.rpy,
-        "axis": j.axis,
     }
+    if j.type not in MULTI_DOF_TYPES:
+        spec["axis"] = j.axis
     if j.type in MOVING_TYPES:
         spec["lower"], spec["upper"] = j.lower, j.upper
         if j.mimic is not None:

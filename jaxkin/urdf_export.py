@@ -124,6 +124,13 @@ def _check_exportable(robot: Robot, prismatic_limit: float | None) -> None:
         raise ModelError(
             "to_urdf needs concrete parameters; call it outside jit/vmap/grad (a URDF is text)."
         )
+    if robot.multi_dof_joints:
+        names = [robot.frame_names[j + 1] for j in robot.multi_dof_joints]
+        raise ModelError(
+            f"to_urdf writes revolute, prismatic and fixed joints only; robot {robot.name!r} has "
+            f"free, ball or planar joints (moving frames {names}). Export the part below them "
+            "(load it with base=...)."
+        )
     if prismatic_limit is not None and not (math.isfinite(prismatic_limit) and prismatic_limit > 0):
         raise ModelError(f"prismatic_limit must be a positive number, got {prismatic_limit!r}.")
 

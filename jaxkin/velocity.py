@@ -16,6 +16,7 @@ from ._checks import (
     check_q,
     check_reference,
     check_twist,
+    check_v,
     finite_guard,
     is_traced,
     result_dtype,
@@ -46,8 +47,10 @@ def twist(
 ) -> jax.Array:
     """Twist ``[v; omega] = J(q) @ qd`` of ``frame`` (default: the tip); shape (6,).
 
-    ``qd`` has shape (dof,); batch ``q`` and ``qd`` together with ``jax.vmap``. Computed column by
-    column from the same forward pass as :func:`~jaxkin.geometric_jacobian`, without forming J.
+    ``qd`` has shape (nv,) (a velocity: for free, ball and planar joints the child frame's
+    twist in its own axes, see :mod:`jaxkin.configuration`); batch ``q`` and ``qd`` together
+    with ``jax.vmap``. Computed column by column from the same forward pass as
+    :func:`~jaxkin.geometric_jacobian`, without forming J.
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("two_link_planar")
@@ -62,7 +65,7 @@ def twist(
     """
     hint = "jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(qs, qds)"
     q = check_q(robot, q, fn="jk.twist", batch_hint=hint)
-    qd = check_q(robot, qd, what="qd", fn="jk.twist", batch_hint=hint)
+    qd = check_v(robot, qd, what="qd", fn="jk.twist", batch_hint=hint)
     check_reference(reference)
     pt = check_point(point, result_dtype(robot, q), "jk.twist")
     return eager(_twist, robot, (robot.frame_index(frame), reference), q, qd, pt)
@@ -88,7 +91,7 @@ def point_velocity(
     """
     hint = "jax.vmap(lambda q, qd: jk.point_velocity(robot, q, qd, point))(qs, qds)"
     q = check_q(robot, q, fn="jk.point_velocity", batch_hint=hint)
-    qd = check_q(robot, qd, what="qd", fn="jk.point_velocity", batch_hint=hint)
+    qd = check_v(robot, qd, what="qd", fn="jk.point_velocity", batch_hint=hint)
     return twist(robot, q, qd, frame=frame, point=point)[:3]
 
 

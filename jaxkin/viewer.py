@@ -71,7 +71,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._checks import check_q
+from ._checks import check_q, check_v
 from .analysis import velocity_ellipsoid
 from .errors import JaxkinError
 from .jacobians import geometric_jacobian
@@ -440,13 +440,13 @@ class View:
         return Ts, V, e.radii, e.axes
 
     def update(self, q: Any, qd: Any = None) -> None:
-        """Move the robot to ``q`` (dof,) and draw the twist for ``qd`` (dof,) if given."""
+        """Move the robot to ``q`` (nq,) and draw the twist for ``qd`` (nv,) if given."""
         self._check_open()
         q = check_q(self.robot, q, fn="jaxkin.viewer.View.update")
         has_qd = qd is not None
-        qd = check_q(
+        qd = check_v(
             self.robot,
-            qd if has_qd else np.zeros(self.robot.dof),
+            qd if has_qd else np.zeros(self.robot.nv),
             "qd",
             "jaxkin.viewer.View.update",
         )
@@ -487,15 +487,18 @@ class View:
                     )
 
     def animate(self, qs: Any, fps: float = 30.0, qds: Any = None, loops: int = 1) -> None:
-        """Play the trajectory ``qs`` (T, dof) (and ``qds`` (T, dof)) at ``fps``; blocks."""
+        """Play the trajectory ``qs`` (T, nq) (and ``qds`` (T, nv)) at ``fps``; blocks."""
         qs = np.asarray(qs, float)
-        if qs.ndim != 2 or qs.shape[1] != self.robot.dof:
+        if qs.ndim != 2 or qs.shape[1] != self.robot.nq:
             raise ViewerError(
-                f"animate needs qs of shape (T, {self.robot.dof}), got {qs.shape}; "
+                f"animate needs qs of shape (T, {self.robot.nq}), got {qs.shape}; "
                 "stack the configurations with np.stack(qs)."
             )
-        if qds is not None and np.shape(qds) != qs.shape:
-            raise ViewerError(f"qds must have the shape of qs {qs.shape}, got {np.shape(qds)}.")
+        if qds is not None and np.shape(qds) != (qs.shape[0], self.robot.nv):
+            raise ViewerError(
+                f"qds must have shape {(qs.shape[0], self.robot.nv)} (one velocity per row of "
+                f"qs), got {np.shape(qds)}."
+            )
         if not fps > 0:
             raise ViewerError(f"fps must be positive, got {fps}.")
         for _ in range(loops):

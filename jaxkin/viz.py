@@ -97,14 +97,14 @@ def _check_qs(robot, qs: Any, what: str = "q", batch: bool = False) -> np.ndarra
         arr = np.asarray(qs, dtype=float)
     except (TypeError, ValueError):
         raise JaxkinError(f"{what} must be numbers, got {qs!r:.80}.") from None
-    want = f"(n_steps, {robot.dof})" if batch else f"({robot.dof},)"
-    ok = arr.ndim == 2 and arr.shape[1] == robot.dof and arr.shape[0] >= 1
+    want = f"(n_steps, {robot.nq})" if batch else f"({robot.nq},)"
+    ok = arr.ndim == 2 and arr.shape[1] == robot.nq and arr.shape[0] >= 1
     if not batch:
-        ok = arr.shape == (robot.dof,)
+        ok = arr.shape == (robot.nq,)
         arr = arr[None]
     if not ok:
         raise JaxkinError(
-            f"{what} must have shape {want} for robot {robot.name!r} ({robot.dof} joints), "
+            f"{what} must have shape {want} for robot {robot.name!r} ({robot.nq} joints), "
             f"got shape {np.shape(qs)}."
         )
     if not np.all(np.isfinite(arr)):

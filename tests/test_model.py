@@ -265,8 +265,8 @@ def test_bad_joint_placements_raise_model_error():
     good = dict(name="j", type="revolute", child="l", axis=(0, 0, 1))
     with pytest.raises(jk.ModelError, match="joint 'j' has a zero axis"):
         jk.Robot.from_joints([{**good, "axis": (0, 0, 0)}])
-    with pytest.raises(jk.ModelError, match="unknown type 'floating'"):
-        jk.Robot.from_joints([{**good, "type": "floating"}])
+    with pytest.raises(jk.ModelError, match="unknown type 'spherical'"):
+        jk.Robot.from_joints([{**good, "type": "spherical"}])
     with pytest.raises(jk.ModelError, match="parent frame 'nowhere' is not defined"):
         jk.Robot.from_joints([{**good, "parent": "nowhere"}])
     with pytest.raises(jk.ModelError, match="frame 'l' already has a parent"):

@@ -197,7 +197,7 @@ def _check_loaded(robot: jk.Robot, rng: np.random.Generator, what: str) -> None:
         assert np.all(np.isfinite(np.asarray(leaf))), what
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     assert not np.any(np.isnan(lo)) and not np.any(np.isnan(hi)) and np.all(lo <= hi), what
-    q = np.clip(rng.uniform(-1.0, 1.0, robot.dof), lo, hi)
+    q = np.clip(rng.uniform(-1.0, 1.0, robot.nq), lo, hi)
     Ts = np.asarray(jk.fk_all(robot, q))
     assert np.all(np.isfinite(Ts)), what
     # the last frame (a mutant may branch: then there is no default frame)

@@ -538,13 +538,18 @@ FLOATING = robot_xml(
 )
 
 
-@pytest.mark.parametrize("kind", ["floating", "planar"])
-def test_floating_and_planar_are_refused_by_name_never_welded(kind):
+def test_floating_loads_as_a_free_joint():
+    robot = load_urdf(FLOATING, dtype=np.float64)  # tests/test_floating_base.py checks it
+    assert (robot.nq, robot.nv, robot.kinds[0]) == (8, 7, "free")
+
+
+def test_planar_off_the_xy_plane_is_refused_by_name_never_welded():
+    kind = "planar"  # without <axis>: normal 1 0 0, not the joint frame's xy plane
     xml = FLOATING.replace('type="floating"', f'type="{kind}"')
     with pytest.raises(URDFError) as info:
         load_urdf(xml)
     e = info.value
-    assert (e.attribute, e.value, e.line) == ("type", kind, 6)
+    assert (e.attribute, e.value, e.line) == ("axis", "1 0 0", 6)
     assert "joint 'root_joint'" in str(e) and "base='pelvis'" in str(e)
     # The description keeps it (for tools that handle it themselves) ...
     assert parse_urdf(xml).joint_map["root_joint"].type == kind
@@ -623,7 +628,7 @@ def test_erd_names_do_not_shadow_the_zoo():
     entry = jk.robots.info("erd/panda")
     assert entry.source.startswith(str(erd.path("erd/panda")))
     assert "example-robot-data" in entry.description
-    assert entry.parameters == {"tip": None, "base": None}
+    assert entry.parameters == {"tip": None, "base": None, "floating_base": False}
     hand = jk.robots.load("erd/panda", tip="panda_hand")
     assert hand.frame_names[-1] == "panda_hand" and hand.dof == 7
 

@@ -16,7 +16,8 @@ are the zoo's DH models): nothing is shadowed. When two files share a stem, each
 ``_description`` (``"erd/anymal_b_simple/anymal"``, ``"erd/anymal_c_simple/anymal"``).
 
 ``jk.robots.erd_names()`` lists them (empty when the package is not installed);
-``jk.robots.load("erd/panda", dtype=..., tip=..., base=...)`` loads one;
+``jk.robots.load("erd/panda", dtype=..., tip=..., base=..., floating_base=...)`` loads one
+(``floating_base=True``: a free root joint for humanoids and legged robots);
 ``jk.robots.info("erd/panda").source`` is its path. Some files of the collection are not
 loadable kinematic models, and loading them raises a :class:`jaxkin.ModelError` that says why
 and lists the other files of the same package (``ur3.urdf`` of 6.0 is an empty xacro output,
@@ -184,11 +185,19 @@ def tool_frame(name: str, base: str | None = None) -> str | None:
     return None
 
 
-def load(name: str, dtype: Any = None, tip: str | None = None, base: str | None = None) -> Robot:
+def load(
+    name: str,
+    dtype: Any = None,
+    tip: str | None = None,
+    base: str | None = None,
+    floating_base: bool = False,
+) -> Robot:
     """Load the example-robot-data robot ``name`` (see :func:`names`) with
     :func:`jaxkin.load_urdf` (``tip``/``base`` select a chain or subtree). Without ``tip``, a
     well-known arm is loaded as the chain to its standard tool frame (:data:`TOOL_FRAMES`, e.g.
-    ``panda_hand_tcp``, ``tool0``), its default frame."""
+    ``panda_hand_tcp``, ``tool0``), its default frame. ``floating_base=True`` adds a free root
+    joint ``"root_joint"`` (humanoids, quadrupeds: see :func:`jaxkin.load_urdf`), e.g.
+    ``jk.robots.load("erd/solo12", floating_base=True)``."""
     from ..urdf import URDFError, load_urdf
 
     p = path(name)
@@ -198,7 +207,7 @@ def load(name: str, dtype: Any = None, tip: str | None = None, base: str | None 
         except URDFError:
             pass  # an unloadable file: load_urdf below says why
     try:
-        return load_urdf(p, tip=tip, base=base, dtype=dtype, name=name)
+        return load_urdf(p, tip=tip, base=base, dtype=dtype, name=name, floating_base=floating_base)
     except URDFError as e:
         siblings = [n for n, q in _index().items() if q.parent == p.parent and n != name]
         folder = p.parent.relative_to(robots_dir()) if robots_dir() else p.parent
@@ -225,8 +234,13 @@ def entry(name: str):
     except importlib.metadata.PackageNotFoundError:  # pragma: no cover - env override
         version = "unknown version"
 
-    def builder(dtype: Any = None, tip: str | None = None, base: str | None = None) -> Robot:
-        return load(name, dtype=dtype, tip=tip, base=base)
+    def builder(
+        dtype: Any = None,
+        tip: str | None = None,
+        base: str | None = None,
+        floating_base: bool = False,
+    ) -> Robot:
+        return load(name, dtype=dtype, tip=tip, base=base, floating_base=floating_base)
 
     return ZooEntry(
         name=name,
