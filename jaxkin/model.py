@@ -228,9 +228,9 @@ class Robot:
     # ------------------------------------------------------------------ info
     @property
     def dof(self) -> int:
-        """Number of independent joint variables: :attr:`nv`, the number of degrees of freedom
-        (the Jacobian's columns). Equal to :attr:`nq`, the length of ``q``, unless the robot has
-        free, ball or planar joints."""
+        """The number of independent joint variables, i.e. degrees of freedom (:attr:`nv`, the
+        Jacobian's columns); equal to :attr:`nq`, the length of ``q``, unless the robot has free,
+        ball or planar joints."""
         return self.nv
 
     @property
