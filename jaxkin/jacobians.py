@@ -42,7 +42,7 @@ from ._checks import (
 from ._jit import eager
 from .configuration import integrate_kernel
 from .errors import JaxkinError, ShapeError
-from .kinematics import frame_pose, scalar_pass, scan_pass, uses_scan
+from .kinematics import frame_pose, scalar_pass, scan_joints, scan_pass
 from .model import Robot
 from .representations import (
     check_representation,
@@ -222,7 +222,7 @@ def frame_jacobian(
 def _check_frame_call(robot, q, frame, point, reference, fn):
     """The checks shared by every Jacobian entry point: ``(q, frame index, point)``."""
     check_reference(reference)
-    q = check_q(robot, q, fn=fn)
+    q = check_q(robot, q, fn=fn, host=True)
     return q, robot.frame_index(frame), check_point(point, result_dtype(robot, q), fn)
 
 
@@ -278,8 +278,9 @@ def jacobian_pass(
     ``q`` must be checked (:func:`geometric_jacobian` and :func:`frame_jacobian` are the checked
     entry points); nothing is checked again here, so solvers call it inside their loops.
     """
-    if uses_scan(robot):
-        return _jacobian_pass_scan(robot, q, f, point, reference)
+    path = scan_joints(robot, f)
+    if path is not None:
+        return _jacobian_pass_scan(robot, q, f, path, point, reference)
     sp = scalar_pass(robot, q, frames=(f,))
     pt = None if point is None else point.astype(sp.dtype)
     R, p = sp.R[f], sp.p[f]
@@ -295,23 +296,25 @@ def jacobian_pass(
     return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
 
 
-def _jacobian_pass_scan(robot: Robot, q, f: int, point, reference: str) -> FrameJacobian:
-    """Table 4.1 vectorised over the joints of a long chain (see ``kinematics.scan_pass``)."""
-    fp = scan_pass(robot, q)
+def _jacobian_pass_scan(robot: Robot, q, f: int, path, point, reference: str) -> FrameJacobian:
+    """Table 4.1 vectorised over the joints of a long path (see ``kinematics.scan_pass``)."""
+    is_tool = robot.has_tool and f == robot.n_joints + 1
+    fp = scan_pass(robot, q, path, tool=is_tool)
     dtype = fp.p.dtype
-    R, p = fp.R[f], fp.p[f]
+    R, p = fp.R[-1], fp.p[-1]
     target = p if point is None else p + R @ point.astype(dtype)
-    kinds = np.array(robot.kinds)
-    on_path = np.zeros(robot.n_joints, dtype=bool)
-    on_path[list(robot.ancestors(f))] = True
-    rev = jnp.asarray((kinds == "revolute") & on_path, dtype=dtype)[:, None]
-    pri = jnp.asarray((kinds == "prismatic") & on_path, dtype=dtype)[:, None]
-    mult = robot.multiplier.astype(dtype)[:, None]
-    cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (n, 3)
+    path = np.asarray(path, dtype=np.int64)
+    kinds = np.array(robot.kinds, dtype=object)[path]
+    rev = jnp.asarray(kinds == "revolute", dtype=dtype)[:, None]
+    pri = jnp.asarray(kinds == "prismatic", dtype=dtype)[:, None]
+    m = robot.multiplier
+    mult = (m[path] if is_traced(m) else jnp.asarray(np.asarray(m)[path])).astype(dtype)[:, None]
+    cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (len, 3)
     cols_w = mult * rev * fp.z
-    qidx = np.maximum(np.array(robot.q_index), 0)
-    Jv = jnp.zeros((robot.nv, 3), dtype=dtype).at[qidx].add(cols_v).T
-    Jw = jnp.zeros((robot.nv, 3), dtype=dtype).at[qidx].add(cols_w).T
+    moving = kinds != "fixed"
+    vidx = np.array(robot.v_index, dtype=np.int64)[path][moving]  # 1-dof joints only here
+    Jv = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_v[moving]).T
+    Jw = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_w[moving]).T
     if reference == "local":
         Jv, Jw = R.T @ Jv, R.T @ Jw
     elif reference == "world":

@@ -116,7 +116,10 @@ def tree():
 def test_one_frame_of_a_tree_traces_only_its_ancestors(tree):
     _, robot = tree
     q = jnp.zeros(robot.dof)
-    for frame in (robot.n_frames - 1, 60):
+    shallow = next(f for f in range(robot.n_frames) if 3 <= len(robot.ancestors(f)) < 6)
+    scanned = [kinematics.scan_joints(robot, f) is not None for f in (robot.n_frames - 1, shallow)]
+    assert scanned == [True, False]  # both kinds of pass are exercised
+    for frame in (robot.n_frames - 1, 60, shallow):
         path = robot.ancestors(frame)
         n_rev = sum(robot.kinds[j] == "revolute" for j in path)
         assert 0 < n_rev and len(path) < 40  # a random tree is shallow
@@ -126,9 +129,14 @@ def test_one_frame_of_a_tree_traces_only_its_ancestors(tree):
             (lambda q, f=frame: jk.jacobian_fwd(robot, q, frame=f), 450),  # tangents too
         ):
             eqns = jaxpr_eqns(fn, q)
-            # every sin and cos evaluates the path's revolute angles and nothing else
-            sizes = [e.invars[0].aval.size for e in eqns if e.primitive.name in ("sin", "cos")]
-            assert sizes and set(sizes) == {n_rev}, sizes
+            if kinematics.scan_joints(robot, frame) is None:
+                # unrolled: every sin and cos evaluates the path's revolute angles, nothing else
+                sizes = [e.invars[0].aval.size for e in eqns if e.primitive.name in ("sin", "cos")]
+                assert sizes and set(sizes) == {n_rev}, sizes
+            else:
+                # scanned (a deep path of joints that do not fold): one step per path joint
+                lengths = [e.params["length"] for e in eqns if e.primitive.name == "scan"]
+                assert lengths and set(lengths) == {len(path)}, lengths
             assert len(eqns) < per_joint * len(path), len(eqns)
 
 
