@@ -156,6 +156,16 @@ def _batch_hint(what: str, code: str) -> str:
     return f" For a batch of {what} {how} {code}."
 
 
+def host_float_array(x: Any, dtype: Any) -> np.ndarray:
+    """Host data ``x`` as the numpy array ``jnp.asarray`` would make of it (float64 becomes
+    float32 while x64 is off; integer and boolean input becomes ``dtype``), without the device
+    round trip."""
+    x = np.asarray(x)
+    if x.dtype.kind != "f":
+        x = x.astype(dtype)
+    return x.astype(jax.dtypes.canonicalize_dtype(x.dtype), copy=False)
+
+
 def _float_array(x: Any, dtype: Any) -> jax.Array:
     """``x`` as a JAX array; integer and boolean input becomes ``dtype``."""
     x = jnp.asarray(x)
@@ -170,13 +180,23 @@ def check_robot(robot: Any, fn: str) -> Robot:
     return robot
 
 
-def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", batch_hint=None):
+def check_q(
+    robot: Robot,
+    q: Any,
+    what: str = "q",
+    fn: str = "this function",
+    batch_hint=None,
+    host: bool = False,
+):
     """A configuration of shape (nq,) as a float JAX array (integers take the robot's dtype).
 
     For a robot with free or ball joints, a concrete ``q`` whose quaternion is zero or not
     finite raises (no rotation exists; under a trace the result is NaN instead). ``batch_hint``
     is the code to suggest for a batch (default: ``jax.vmap(lambda q: fn(robot, q))(qs)``); it
-    must run when pasted.
+    must run when pasted. ``host=True`` (entry points that hand ``q`` to
+    :func:`jaxkin._jit.eager`): host data (numpy, lists) stays a numpy array of the dtype JAX
+    would give it, since a compiled executable takes numpy input directly and converting to a
+    JAX array first costs about 60 us per call.
     """
     check_robot(robot, fn)
     nq = robot.nq
@@ -205,7 +225,10 @@ def check_q(robot: Robot, q: Any, what: str = "q", fn: str = "this function", ba
             f"{fn}: {what} must have shape ({nq},) for robot {robot.name!r} "
             f"({joints}), got shape {shape}.{hint}"
         )
-    q = _float_array(q, robot.dtype)
+    if host and not isinstance(q, jax.Array):
+        q = host_float_array(q, robot.dtype)
+    else:
+        q = _float_array(q, robot.dtype)
     if robot.nq != robot.nv:
         check_rotations(robot, q, what, fn)
     return q
@@ -235,11 +258,18 @@ def check_rotations(robot: Robot, q: Any, what: str, fn: str) -> None:
             )
 
 
-def check_v(robot: Robot, v: Any, what: str = "qd", fn: str = "this function", batch_hint=None):
+def check_v(
+    robot: Robot,
+    v: Any,
+    what: str = "qd",
+    fn: str = "this function",
+    batch_hint=None,
+    host: bool = False,
+):
     """A velocity (tangent vector) of shape (nv,) as a float JAX array; for robots without free,
-    ball or planar joints this is :func:`check_q` (nv == nq)."""
+    ball or planar joints this is :func:`check_q` (nv == nq). ``host``: as in :func:`check_q`."""
     if robot.nq == robot.nv:
-        return check_q(robot, v, what, fn, batch_hint)
+        return check_q(robot, v, what, fn, batch_hint, host)
     check_robot(robot, fn)
     nv = robot.nv
     v = _as_array(v, what, fn, "an array of numbers")
@@ -254,6 +284,8 @@ def check_v(robot: Robot, v: Any, what: str = "qd", fn: str = "this function", b
             f"{nv} entries {list(robot.velocity_names)}; q has nq = {robot.nq}), got shape "
             f"{shape}.{hint}"
         )
+    if host and not isinstance(v, jax.Array):
+        return host_float_array(v, robot.dtype)
     return _float_array(v, robot.dtype)
 
 

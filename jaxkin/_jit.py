@@ -29,6 +29,8 @@ from collections.abc import Callable
 from typing import Any
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 from ._checks import inside_trace, is_traced
 
@@ -91,17 +93,19 @@ def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
     :func:`jaxkin.kinematics.scalar_pass`) and cached under ``(kernel, robot, static)``; the
     robot is an immutable value, so an equal robot shares the executable and a changed one
     (``robot.replace(...)``) gets its own. ``jax.jit`` compiles once per array shape and dtype.
+    ``arrays`` may be host numpy arrays (handed to the executable as they are: cheaper than a
+    JAX array made first).
     At most :data:`EAGER_CACHE_SIZE` keys are kept. Inside ``jax.disable_jit()`` the kernel runs
     op by op and nothing is cached (cheaper for a robot used once, e.g. a property test over
     random robots).
     """
     if inside_trace() or not robot.is_concrete or is_traced(arrays) or _jit_disabled():
-        return kernel(robot, *static, *arrays)
+        return kernel(robot, *static, *_device(arrays))
     key = (kernel, robot, static)
     try:
         compiled = _eager_cache.pop(key, None)
     except TypeError:  # an unhashable static option: no cache
-        return kernel(robot, *static, *arrays)
+        return kernel(robot, *static, *_device(arrays))
     if compiled is None:
         options = compiler_options() or None
         compiled = jax.jit(functools.partial(kernel, robot, *static), compiler_options=options)
@@ -109,6 +113,11 @@ def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
     while len(_eager_cache) > EAGER_CACHE_SIZE:
         _eager_cache.popitem(last=False)
     return compiled(*arrays)
+
+
+def _device(arrays: tuple) -> tuple:
+    """Host arrays (``check_q(..., host=True)``) as JAX arrays, for kernels run op by op."""
+    return tuple(jnp.asarray(a) if isinstance(a, np.ndarray) else a for a in arrays)
 
 
 def _jit_disabled() -> bool:

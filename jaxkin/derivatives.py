@@ -60,11 +60,11 @@ def _check_call(robot: Robot, q: Any, qd: Any, frame, point, reference: str, fn:
     """Entry checks shared by the derivatives: ``(q, qd, frame index, point)``, one dtype."""
     check_reference(reference)
     hint = hint or f"jax.vmap(lambda q, qd: {fn}(robot, q, qd))(qs, qds)"
-    q = check_q(robot, q, fn=fn, batch_hint=hint)
+    q = check_q(robot, q, fn=fn, batch_hint=hint, host=True)
     if qd is None:  # the Hessian: no velocity
         qd = q
     else:
-        qd = check_v(robot, qd, what="qd", fn=fn, batch_hint=hint)
+        qd = check_v(robot, qd, what="qd", fn=fn, batch_hint=hint, host=True)
     dtype = result_dtype(robot, q, qd)
     pt = check_point(point, dtype, fn)
     return q.astype(dtype), qd.astype(dtype), robot.frame_index(frame), pt

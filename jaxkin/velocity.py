@@ -64,8 +64,8 @@ def twist(
     True
     """
     hint = "jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(qs, qds)"
-    q = check_q(robot, q, fn="jk.twist", batch_hint=hint)
-    qd = check_v(robot, qd, what="qd", fn="jk.twist", batch_hint=hint)
+    q = check_q(robot, q, fn="jk.twist", batch_hint=hint, host=True)
+    qd = check_v(robot, qd, what="qd", fn="jk.twist", batch_hint=hint, host=True)
     check_reference(reference)
     pt = check_point(point, result_dtype(robot, q), "jk.twist")
     return eager(_twist, robot, (robot.frame_index(frame), reference), q, qd, pt)
