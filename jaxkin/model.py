@@ -222,8 +222,14 @@ class Robot:
         return mine is not None and mine == theirs
 
     def __hash__(self) -> int:
-        key = self._value_key()
-        return id(self) if key is None else hash(key)
+        h = self.__dict__.get("_hash")
+        if h is None:  # hashing the key walks every name of the structure: once per robot
+            key = self._value_key()
+            if key is None:
+                return id(self)
+            h = hash(key)
+            object.__setattr__(self, "_hash", h)
+        return h
 
     # ------------------------------------------------------------------ info
     @property
