@@ -655,8 +655,7 @@ class ResultWriter:
         if self.path == "-":
             self._file.open(sys.stdout)
             return
-        self._check_target()
-        self._open()
+        self._check_target()  # the temporary is created on entering the block (__enter__)
 
     def _check_target(self) -> None:
         parent = os.path.dirname(self.path)
@@ -695,6 +694,7 @@ class ResultWriter:
         self._check_signal()
         if self._file is None:
             raise JaxkinError(f"ResultWriter for {self.path}: append after commit or abort.")
+        self._open_once()  # used without a with-block
         missing = set(self.fields) - set(rows)
         if missing:
             raise ShapeError(f"ResultWriter.append: no rows for field(s) {sorted(missing)}.")
@@ -722,6 +722,7 @@ class ResultWriter:
                 f"ResultWriter for {self.path}: {self.rows} of {self.n} rows were appended; "
                 "nothing was written."
             )
+        self._open_once()  # n == 0 without a with-block
         self._io(self._file.close)
         self._file = None
         if self.tmp is not None:
@@ -763,7 +764,14 @@ class ResultWriter:
                 signal.signal(signal.SIGTERM, self._terminated)
             if hasattr(signal, "SIGXFSZ"):
                 self._saved.append((signal.SIGXFSZ, signal.signal(signal.SIGXFSZ, signal.SIG_IGN)))
+        # Only now, with the handlers in place: a SIGTERM can no longer find a temporary that
+        # nothing would remove.
+        self._open_once()
         return self
+
+    def _open_once(self) -> None:
+        if self.path != "-" and self.tmp is None and self._file is not None:
+            self._open()
 
     def _terminated(self, signum: int, frame: Any) -> None:
         previous = self._saved[0][1]
