@@ -155,3 +155,29 @@ def test_disable_jit_runs_op_by_op_and_caches_nothing(puma):
     np.testing.assert_allclose(
         np.asarray(J), np.asarray(jk.geometric_jacobian(robot, q)), rtol=0, atol=1e-15
     )
+
+
+@pytest.mark.parametrize("name", sorted(CALLS))
+def test_host_input_gives_the_answer_and_dtype_of_jax_input(puma, name):
+    """numpy arrays and lists go to the executable as they are (no device round trip first):
+    the same numbers and dtypes as JAX arrays, integers take the robot's dtype, float64 input
+    becomes float32 while x64 is off (as jnp.asarray does), op by op too."""
+    robot, q, qd = puma
+    call = CALLS[name]
+    expected = _leaves(call(robot, q, qd))
+    for host in ((np.asarray(q), np.asarray(qd)), (np.asarray(q).tolist(), np.asarray(qd))):
+        got = _leaves(call(robot, *host))
+        for a, b in zip(got, expected, strict=True):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    ints = _leaves(call(robot, np.array([1, -1, 1, 1, 2, -1], np.int32), np.ones(6, np.int64)))
+    assert ints[0].dtype == np.float64
+    with jax.disable_jit():
+        for a, b in zip(_leaves(call(robot, np.asarray(q), np.asarray(qd))), expected, strict=True):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-14 * max(1.0, np.abs(b).max()))
+    robot32 = robot.astype(np.float32)
+    with jax.enable_x64(False):
+        got32 = _leaves(call(robot32, np.asarray(q), np.asarray(qd)))
+    assert all(a.dtype == np.float32 for a in got32)
+    for a, b in zip(got32, expected, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=2e-5 * max(1.0, np.abs(b).max()))

@@ -84,8 +84,11 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
     q = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, robot.dof))
     qd = jnp.asarray(np.random.default_rng(3).uniform(-1, 1, robot.dof))
     outs = []
-    for threshold in (kinematics.SCAN_MIN_JOINTS, 10**9):
+    scanned = kinematics.SCAN_MIN_JOINTS
+    for threshold in (scanned, 10**9):  # scanned, then unrolled
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", threshold)
+        monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", threshold)
+        assert kinematics.uses_scan(robot) == (threshold == scanned)
         outs.append(
             [
                 jk.fk_all(robot, q),
