@@ -119,7 +119,10 @@ def finite_guard(fn: str, **inputs: Any) -> FiniteGuard:
 def result_dtype(robot: Robot, *arrays: Any) -> np.dtype:
     """The float dtype of a computation on ``robot`` and float ``arrays``: float32 only if all
     are (numpy's promotion, which equals JAX's for float32/float64 and is much cheaper)."""
-    return np.result_type(robot.base.dtype, *(a.dtype for a in arrays))
+    dtype = robot.base.dtype
+    if all(a.dtype == dtype for a in arrays):  # the common case, without numpy's promotion
+        return np.dtype(dtype)
+    return np.result_type(dtype, *(a.dtype for a in arrays))
 
 
 def safe_norm(x: jax.Array, axis: Any = None) -> jax.Array:
