@@ -14,8 +14,9 @@ call. Timed (steady state: median of repeats after a first call that compiles):
 The ratios are each row's time over ``solve`` (the issue's target: <= 2x). The derivative rule
 is the same whatever the solver did, so the ratio falls as targets get harder.
 
-Usage: ``python3 -m bench.ik_gradient [--n N] [--robots panda,ur5,niryo_one] [--repeats R]``;
-prints a markdown table with the machine and the load (``os.getloadavg``).
+Usage: ``python3 -m bench.ik_gradient [--n N] [--robots panda,ur5,niryo_one] [--repeats R]
+[--write-md]``; prints a markdown table with the machine and the load (``os.getloadavg``), writes
+``results/ik_gradient.json`` and, with ``--write-md``, the gradient section of ``IK.md``.
 """
 
 from __future__ import annotations
@@ -29,7 +30,16 @@ import numpy as np
 
 import jaxkin as jk
 
-from .report import first_and_repeats, log, machine_info, markdown_table, utc_now
+from .report import (
+    RESULTS_DIR,
+    first_and_repeats,
+    log,
+    machine_info,
+    markdown_table,
+    replace_section,
+    utc_now,
+    write_json,
+)
 
 ROBOTS = {
     "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
@@ -86,12 +96,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--n", type=int, default=1000)
     p.add_argument("--robots", default="panda,ur5,niryo_one")
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--write-md", action="store_true", help="update the gradient section of IK.md")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     load0 = os.getloadavg()
-    table = []
+    table, raw = [], {}
     for name in args.robots.split(","):
         r = measure(name, args.n, args.repeats)
+        raw[name] = {k: v if k == "converged" else _numbers(v) for k, v in r.items()}
         base = r["solve"]["steady_s"]
         for label in ("solve", "jvp", "grad", "jacobian"):
             t = r[label]["steady_s"]
@@ -108,14 +120,27 @@ def main(argv: list[str] | None = None) -> None:
             )
     load1 = os.getloadavg()
     info = machine_info()
-    print(
-        f"jk.solve_ik derivatives, {args.n:,} targets per arm, float64, {utc_now()}; "
-        f"jax {info['jax']}, jaxkin {info['jaxkin']}; {info['cpu_model'][0]}, "
-        f"{info['cpus_usable']} usable cores; "
-        f"load average {load0[0]:.1f} before, {load1[0]:.1f} after\n"
-    )
     header = ["robot", "what", "first call (s)", "steady (ms)", "per target (us)", "vs solve"]
-    print(markdown_table([*header, "converged"], table, align="llrrrrr"))
+    text = (
+        f"`python3 -m bench.ik_gradient`: jk.solve_ik derivatives, {args.n:,} targets per arm, "
+        f"float64, {utc_now()}; jax {info['jax']}, jaxkin {info['jaxkin']}; "
+        f"{info['cpu_model'][0]}, {info['cpus_usable']} usable cores; load average (1 min) "
+        f"{load0[0]:.1f} before, {load1[0]:.1f} after.\n\n"
+        + markdown_table([*header, "converged"], table, align="llrrrrr")
+    )
+    print(text)
+    write_json(
+        RESULTS_DIR / "ik_gradient.json",
+        dict(n=args.n, machine=info, load_before=load0, load_after=load1, rows=raw),
+    )
+    if args.write_md:
+        here = RESULTS_DIR.parent
+        replace_section(here / "IK.md", text, "<!-- gradient:start -->", "<!-- gradient:end -->")
+
+
+def _numbers(row: dict) -> dict:
+    """The JSON-able part of a :func:`first_and_repeats` result (the arrays dropped)."""
+    return {k: v for k, v in row.items() if k != "result"}
 
 
 if __name__ == "__main__":

@@ -364,7 +364,7 @@ def tables(res: dict[str, Any]) -> str:
     la, lb = res["load_average_before"], res["load_average_after"]
     out = [
         f"`python3 -m bench.ik_protocols{' --quick' if res['quick'] else ''}` ({res['date']}; "
-        f"{', '.join(m['cpu_model'])}, {m['cpus_usable']} cores shared with other jobs: load "
+        f"{', '.join(m['cpu_model'])}, {m['cpus_usable']} cores; load "
         f"average (1, 5, 15 min) {', '.join(f'{x:.1f}' for x in la)} before, "
         f"{', '.join(f'{x:.1f}' for x in lb)} after; jax {m['jax']}, numpy {m['numpy']}, "
         f"pytracik {res['versions']['pytracik']}, roboticstoolbox-python {m['roboticstoolbox']}, "

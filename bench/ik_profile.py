@@ -1,0 +1,79 @@
+"""Where the time of a batched ``jk.solve_ik`` goes (bench/IK.md, "Where the time per target goes").
+
+For the Panda and the UR5: 10,000 random reachable targets (``jk.sample_configurations`` ->
+``jk.fk``), one start at the middle of the limits, default arguments, float64, one jitted call.
+Prints the steady time per target, the distribution of solver steps per target and the share of
+targets (and of steps) that needed restarts, both from the solution's own ``steps`` and ``seed``
+fields; the wall time per lane-step if every lane were busy; and, for scale, the time of a batched
+pose + Jacobian (``frame_jacobian``) per configuration on as many configurations as the solver
+has lanes.
+
+Usage: ``python3 -m bench.ik_profile [--n N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxkin as jk
+from jaxkin import ik as ik_module
+
+ROBOTS = {
+    "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
+    "ur5": lambda: jk.robots.load("ur5"),
+}
+
+
+def profile(name: str, n: int) -> str:
+    robot = ROBOTS[name]()
+    qs = jk.sample_configurations(robot, n, jax.random.key(0))
+    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
+    lo, hi = jk.sampling_bounds(robot)
+    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
+    solve = jax.jit(lambda T: jk.solve_ik(robot, T, q0, throw=False))
+    sol = jax.block_until_ready(solve(T))
+    times = []
+    for _ in range(3):
+        t = time.perf_counter()
+        sol = jax.block_until_ready(solve(T))
+        times.append(time.perf_counter() - t)
+    total = min(times)
+    steps, seeds = np.asarray(sol.steps), np.asarray(sol.seed)
+    lanes = ik_module._lanes(n)
+    jac = jax.jit(jax.vmap(lambda q: jk.jacobians.frame_jacobian(robot, q)))
+    Q = jnp.asarray(np.asarray(qs)[:lanes])
+    jax.block_until_ready(jac(Q))
+    t = time.perf_counter()
+    for _ in range(50):
+        jax.block_until_ready(jac(Q))
+    per_config = (time.perf_counter() - t) / 50 / lanes
+    restarted = seeds > 0
+    return (
+        f"{name}: {n} targets in {total * 1e3:.0f} ms = {total / n * 1e6:.0f} us per target; "
+        f"{lanes} lanes; steps per target mean {steps.mean():.1f}, median {np.median(steps):.0f}, "
+        f"p99 {np.percentile(steps, 99):.0f}, max {steps.max()} (the loop runs at least that "
+        f"many iterations; the work would fill {steps.sum() / lanes:.0f}); targets restarted "
+        f"{100 * restarted.mean():.1f}%, their share of the steps "
+        f"{100 * steps[restarted].sum() / steps.sum():.0f}%; wall time per lane-step if every "
+        f"lane were busy {total / steps.sum() * 1e6:.2f} us; pose + Jacobian alone "
+        f"{per_config * 1e6:.2f} us per configuration; load average {os.getloadavg()[0]:.1f}"
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--n", type=int, default=10_000)
+    args = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    for name in ROBOTS:
+        print(profile(name, args.n), flush=True)
+
+
+if __name__ == "__main__":
+    main()
