@@ -340,14 +340,15 @@ def check_reference(reference: Any) -> str:
     return reference
 
 
-def check_J(J: Any, fn: str, batch_hint: str | None = None) -> jax.Array:
-    """A Jacobian of shape (m, dof), m and dof >= 1, as a float JAX array. ``batch_hint``: the
-    code suggested for a batch of Jacobians ``Js`` (default ``jax.vmap(fn)(Js)``); it must run
-    when pasted, with the function's other arguments under their parameter names."""
+def check_J(J: Any, fn: str, batch_hint: str | None = None, zero_dof: bool = False) -> jax.Array:
+    """A Jacobian of shape (m, dof), m and dof >= 1 (dof == 0 too with ``zero_dof``: a robot
+    with no moving joint), as a float JAX array. ``batch_hint``: the code suggested for a batch
+    of Jacobians ``Js`` (default ``jax.vmap(fn)(Js)``); it must run when pasted, with the
+    function's other arguments under their parameter names."""
     J = _as_array(J, "J", fn, "an array of numbers")
     _numeric(J, "J", fn)
     shape = tuple(J.shape)
-    if len(shape) != 2 or shape[0] == 0 or shape[1] == 0:
+    if len(shape) != 2 or shape[0] == 0 or (shape[1] == 0 and not zero_dof):
         hint = ""
         if len(shape) == 3:
             hint = _batch_hint("Jacobians", batch_hint or f"jax.vmap({fn})(Js)")

@@ -126,11 +126,14 @@ def _row_indices(rows: Any, m: int, fn: str) -> tuple[int, ...] | None:
     )
 
 
-def _guarded(J: Any, rows: Any, fn: str, batch_hint: str | None = None, **others: Any):
+def _guarded(
+    J: Any, rows: Any, fn: str, batch_hint: str | None = None, zero_dof=True, **others: Any
+):
     """The selected rows of the checked ``J`` and the non-finite guard of ``J`` and ``others``
     (module doc, "Non-finite input"): the guard checks all of J, not only the selected rows.
-    ``batch_hint``: the code suggested for a batch of Jacobians (see ``check_J``)."""
-    Jc = check_J(J, fn, batch_hint)
+    ``batch_hint``: the code suggested for a batch of Jacobians (see ``check_J``); ``zero_dof``:
+    whether a (m, 0) Jacobian (a robot with no moving joint) is accepted."""
+    Jc = check_J(J, fn, batch_hint, zero_dof=zero_dof)
     idx = _row_indices(rows, Jc.shape[0], fn)
     guard = finite_guard(fn, J=Jc, **others)
     Jc = guard.clean(Jc)
@@ -149,6 +152,8 @@ def _task_singular_values(Jr: jax.Array) -> jax.Array:
     ``min(m, n)`` come from the SVD; for ``m > n`` the remaining ``m - n`` axes have length 0.
     """
     m, n = Jr.shape
+    if n == 0:  # a robot with no moving joint moves along no axis
+        return jnp.zeros(m, dtype=Jr.dtype)
     s = jnp.linalg.svd(Jr, compute_uv=False)
     if m > n:
         s = jnp.concatenate([s, jnp.zeros(m - n, dtype=s.dtype)])
@@ -193,7 +198,8 @@ def rank(J: Any, rows: Any = "all", *, rtol: float | None = None, atol: float = 
     Jr, guard = _guarded(J, rows, "jk.rank", hint, rtol=rtol, atol=atol)
     s = jnp.linalg.svd(Jr, compute_uv=False)
     rt = _default_rtol(Jr.shape, Jr.dtype) if rtol is None else rtol
-    tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * s[0])
+    largest = s[0] if s.shape[0] else jnp.zeros((), s.dtype)  # no column: rank 0
+    tol = jnp.maximum(jnp.asarray(atol, s.dtype), rt * largest)
     return guard(jnp.sum(s > tol).astype(jnp.int32))
 
 
@@ -301,7 +307,13 @@ def dependent_columns(
     (module doc): raises eagerly; under a trace see :class:`DependentColumns`.
     """
     Jr, guard = _guarded(
-        J, rows, "jk.dependent_columns", rtol=rtol, atol=atol, coefficient_tol=coefficient_tol
+        J,
+        rows,
+        "jk.dependent_columns",
+        zero_dof=False,
+        rtol=rtol,
+        atol=atol,
+        coefficient_tol=coefficient_tol,
     )
     n = Jr.shape[1]
     _, s, Vt = jnp.linalg.svd(jax.lax.stop_gradient(Jr), full_matrices=True)

@@ -82,3 +82,23 @@ def test_cli_says_there_is_nothing_to_move(capsys, command):
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1
     assert "no moving joint" in err and "nothing to move" in err and "erd/iris_simple" in err
+
+
+def test_measures_of_a_zero_dof_jacobian():
+    """A robot with no moving joint moves along no axis: every task-space singular value is 0,
+    so manipulability 0, condition number inf, rank 0, near-singular for any threshold > 0; the
+    null-space analysis refuses it (there are no columns to name)."""
+    robot = jk.robots.load("erd/quadrotor_base")
+    J = jk.geometric_jacobian(robot, np.zeros(0))
+    for measure in jk.analysis.MEASURES:
+        for rows in ("all", "translation", [0, 5]):
+            assert float(jk.manipulability(J, measure, rows)) == 0.0
+    assert float(jk.condition_number(J)) == np.inf
+    assert int(jk.analysis.rank(J)) == 0
+    assert jk.singular_values(J).shape == (0,)
+    assert bool(jk.near_singular(J, 1e-6))
+    np.testing.assert_array_equal(np.asarray(jk.analysis.velocity_ellipsoid(J).radii), 0.0)
+    assert float(jax.jit(jk.manipulability)(J)) == 0.0
+    assert np.all(np.isfinite(np.asarray(jax.grad(jk.manipulability)(J))))
+    with pytest.raises(jk.ShapeError, match=r"\(6, 0\)"):
+        jk.analysis.dependent_columns(J)
