@@ -1,7 +1,8 @@
 """xacro: ``jk.load_urdf("robot.urdf.xacro", xacro_args=...)`` expands the file with the xacro
 package and parses the result with the strict URDF parser. Oracle: the URDF the xacro file
 should produce, written by hand; the two loaded robots compare equal (every number, name, limit
-and the default frame), for the argument's default and a given value."""
+and the default frame), for the argument's default and a given value; and a real xacro (the
+KUKA LBR iiwa of rtbdata) against the URDF shipped beside it."""
 
 from __future__ import annotations
 
@@ -122,3 +123,30 @@ def test_without_xacro_the_error_names_the_extra(xacro_file, monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_xacro)
     with pytest.raises(URDFError, match=r"pip install 'jaxkin\[xacro\]'"):
         jk.load_urdf(xacro_file)
+
+
+def test_a_real_xacro_expands_to_the_urdf_shipped_beside_it(monkeypatch):
+    """The KUKA LBR iiwa 14 R820 of the Robotics Toolbox's data package (rtbdata: ROS-Industrial's
+    kuka_experimental description): its xacro, which includes macros from two packages through
+    ``$(find ...)``, against the URDF generated from it in the same folder. ROS resolves
+    ``$(find pkg)`` through its package index; here a stand-in index names the two package
+    folders (offline, as a ROS workspace would)."""
+    import sys
+    import types
+    from pathlib import Path
+
+    rtbdata = pytest.importorskip("rtbdata")
+    root = Path(rtbdata.__file__).parent / "xacro" / "kuka_description"
+    shares = {
+        "kuka_lbr_iiwa_support": root / "kuka_lbr_iiwa",
+        "kuka_resources": root / "kuka_resources",
+    }
+    index = types.ModuleType("ament_index_python.packages")
+    index.get_package_share_directory = lambda name: str(shares[name])
+    monkeypatch.setitem(sys.modules, "ament_index_python", types.ModuleType("ament_index_python"))
+    monkeypatch.setitem(sys.modules, "ament_index_python.packages", index)
+    urdf = root / "kuka_lbr_iiwa" / "urdf"
+    expanded = jk.load_urdf(urdf / "lbr_iiwa_14_r820.xacro", dtype=np.float64)
+    shipped = jk.load_urdf(urdf / "lbr_iiwa_14_r820.urdf", dtype=np.float64)
+    assert expanded == shipped  # every number, name, limit and the default frame
+    assert expanded.dof == 7 and expanded.frame_names[expanded.tip_frame] == "tool0"
