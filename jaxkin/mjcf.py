@@ -450,16 +450,27 @@ def load_mjcf(
         _select(specs, parent_of, base, None, label, body_names)  # raises, naming base
     chosen = _select(specs, parent_of, root, tip, label, ["world", *parent_of])
     selected = {s["name"] for s in chosen if s["type"] != "fixed"}
-    mimic = _couplings(mujoco, m, label, selected, joint_names)
-    leaders: dict[str, dict[str, Any]] = {}
     all_moving = {s["name"]: s for s in specs if s["type"] in ("revolute", "prismatic")}
+    # The couplings of the loaded joints, and of every joint outside the part that drives them,
+    # followed to the end of its chain (a leader outside may itself follow a joint inside).
+    coupled = set(selected)
+    mimic = _couplings(mujoco, m, label, coupled, joint_names)
+    while True:
+        outside = {c["joint"] for c in mimic.values()} - coupled
+        outside &= set(all_moving)
+        if not outside:
+            break
+        coupled |= outside
+        mimic = _couplings(mujoco, m, label, coupled, joint_names)
+    leaders: dict[str, dict[str, Any]] = {}
+    for name in sorted(coupled - selected):
+        src = all_moving[name]
+        leaders[name] = {k: src[k] for k in ("name", "type", "lower", "upper")}
+        if name in mimic:
+            leaders[name]["mimic"] = mimic[name]
     for s in chosen:
         if s["name"] in mimic:
             s["mimic"] = mimic[s["name"]]
-            lead = mimic[s["name"]]["joint"]
-            if lead not in selected and lead in all_moving:
-                src = all_moving[lead]
-                leaders[lead] = {k: src[k] for k in ("name", "type", "lower", "upper")}
     out = [dict(s) for s in chosen]
     try:
         return Robot.from_joints(

@@ -305,3 +305,22 @@ def test_without_mujoco_the_error_names_the_extra(monkeypatch):
 def test_exported():
     assert jk.load_mjcf.__module__ == "jaxkin.mjcf"
     assert issubclass(MJCFError, jk.ModelError)
+
+
+def test_a_leader_outside_the_part_that_itself_follows_a_joint_inside():
+    """Loading the chain to ``tip`` leaves out the branch with joint ``outer``; ``arm2`` (in the
+    chain) follows ``outer``, which follows ``lead`` (in the chain): the chain is followed
+    through the joint left out, so ``arm2`` moves with ``lead`` and ``q`` is ``lead`` alone."""
+    xml = _mj(
+        f"""<body name="a"><joint name="lead" axis="0 0 1" ref="5" range="-60 60"/>{G}
+              <body name="side" pos="0 .3 0"><joint name="outer" axis="1 0 0" ref="-10"/>{G}
+              </body>
+              <body name="b" pos=".4 0 0"><joint name="arm2" axis="0 1 0"/>{G}
+                <site name="tip" pos=".2 0 0"/></body></body>""",
+        """<equality><joint joint1="outer" joint2="lead" polycoef="0.2 -1.5 0 0 0"/>
+             <joint joint1="arm2" joint2="outer" polycoef="-0.1 0.4 0 0 0"/></equality>""",
+    )
+    m, robot = _both(xml, tip="tip")
+    assert robot.joint_names == ("lead",) and "side" not in robot.frame_names
+    qs = np.vstack([[m.qpos0[0]], sample(robot, 3, seed=4)])
+    assert check(m, robot, qs, jac_frames=["tip", "b"]) >= 3
