@@ -79,23 +79,26 @@ def test_chunked_map_compiles_once_for_any_number_of_chunks():
 # --- long chains -------------------------------------------------------------------------------
 @pytest.mark.parametrize("convention", ["standard", "modified"])
 def test_scan_path_equals_unrolled_path(convention, monkeypatch):
-    robot = _chain(36, seed=3, convention=convention)
+    """A 12-joint chain whose placements do not fold is scanned by default (and a 36-joint one
+    by its length: test_long_chain_program_size_does_not_grow_with_length); lifting both
+    thresholds unrolls it: the two passes agree."""
+    robot = _chain(12, seed=3, convention=convention)
     assert kinematics.uses_scan(robot)
     q = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, robot.dof))
     qd = jnp.asarray(np.random.default_rng(3).uniform(-1, 1, robot.dof))
     outs = []
-    scanned = kinematics.SCAN_MIN_JOINTS
-    for threshold in (scanned, 10**9):  # scanned, then unrolled
-        monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", threshold)
-        monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", threshold)
-        assert kinematics.uses_scan(robot) == (threshold == scanned)
+    defaults = (kinematics.SCAN_MIN_JOINTS, kinematics.SCAN_MIN_UNFOLDED)
+    for joints, unfolded in (defaults, (10**9, 10**9)):  # scanned, then unrolled
+        monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", joints)
+        monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", unfolded)
+        assert kinematics.uses_scan(robot) == (joints == defaults[0])
         outs.append(
             [
                 jk.fk_all(robot, q),
-                jk.fk(robot, q, frame="link17"),
+                jk.fk(robot, q, frame="link7"),
                 *[
                     jk.geometric_jacobian(robot, q, frame=f, point=[0.1, -0.2, 0.3], reference=ref)
-                    for f in (None, "link17")
+                    for f in (None, "link7")
                     for ref in jk.jacobians.REFERENCES
                 ],
                 jk.twist(robot, q, qd),
