@@ -129,11 +129,11 @@ def test_a_real_xacro_expands_to_the_urdf_shipped_beside_it(monkeypatch):
     """The KUKA LBR iiwa 14 R820 of the Robotics Toolbox's data package (rtbdata: ROS-Industrial's
     kuka_experimental description): its xacro, which includes macros from two packages through
     ``$(find ...)``, against the URDF generated from it in the same folder. ROS resolves
-    ``$(find pkg)`` through its package index; here a stand-in index names the two package
-    folders (offline, as a ROS workspace would)."""
-    import sys
-    import types
+    ``$(find pkg)`` through its package index; here xacro's hook names the two package folders
+    (offline, as a ROS workspace would)."""
     from pathlib import Path
+
+    from xacro import substitution_args
 
     rtbdata = pytest.importorskip("rtbdata")
     root = Path(rtbdata.__file__).parent / "xacro" / "kuka_description"
@@ -141,10 +141,9 @@ def test_a_real_xacro_expands_to_the_urdf_shipped_beside_it(monkeypatch):
         "kuka_lbr_iiwa_support": root / "kuka_lbr_iiwa",
         "kuka_resources": root / "kuka_resources",
     }
-    index = types.ModuleType("ament_index_python.packages")
-    index.get_package_share_directory = lambda name: str(shares[name])
-    monkeypatch.setitem(sys.modules, "ament_index_python", types.ModuleType("ament_index_python"))
-    monkeypatch.setitem(sys.modules, "ament_index_python.packages", index)
+    # xacro's $(find) hook (ament's index in ROS 2; xacrodoc, installed with the Robotics
+    # Toolbox, replaces it with its own search): here, the two package folders
+    monkeypatch.setattr(substitution_args, "_eval_find", lambda name: str(shares[name]))
     urdf = root / "kuka_lbr_iiwa" / "urdf"
     expanded = jk.load_urdf(urdf / "lbr_iiwa_14_r820.xacro", dtype=np.float64)
     shipped = jk.load_urdf(urdf / "lbr_iiwa_14_r820.urdf", dtype=np.float64)
