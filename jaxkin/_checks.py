@@ -169,6 +169,13 @@ def host_float_array(x: Any, dtype: Any) -> np.ndarray:
     return x.astype(jax.dtypes.canonicalize_dtype(x.dtype), copy=False)
 
 
+def _float_input(x: Any, dtype: Any, host: bool) -> Any:
+    """Checked input as a float array: host data stays numpy with ``host`` (see ``check_q``)."""
+    if host and not isinstance(x, jax.Array):
+        return host_float_array(x, dtype)
+    return _float_array(x, dtype)
+
+
 def _float_array(x: Any, dtype: Any) -> jax.Array:
     """``x`` as a JAX array; integer and boolean input becomes ``dtype``."""
     x = jnp.asarray(x)
@@ -228,10 +235,7 @@ def check_q(
             f"{fn}: {what} must have shape ({nq},) for robot {robot.name!r} "
             f"({joints}), got shape {shape}.{hint}"
         )
-    if host and not isinstance(q, jax.Array):
-        q = host_float_array(q, robot.dtype)
-    else:
-        q = _float_array(q, robot.dtype)
+    q = _float_input(q, robot.dtype, host)
     if robot.nq != robot.nv:
         check_rotations(robot, q, what, fn)
     return q
@@ -287,9 +291,7 @@ def check_v(
             f"{nv} entries {list(robot.velocity_names)}; q has nq = {robot.nq}), got shape "
             f"{shape}.{hint}"
         )
-    if host and not isinstance(v, jax.Array):
-        return host_float_array(v, robot.dtype)
-    return _float_array(v, robot.dtype)
+    return _float_input(v, robot.dtype, host)
 
 
 def refuse_multi_dof(robot: Robot, fn: str, why: str = "") -> None:
