@@ -21,7 +21,9 @@ Two solvers, both one jitted ``lax.while_loop`` that stops as soon as the target
   converges or ``num_seeds`` starts are spent: the default (64 starts of at most 30 steps) costs
   easy targets nothing more. From the mid-limit start, 1,000 random reachable targets each of
   the Panda, UR5, UR10, Kinova and Niryo One: 99.9-100% (one start: 67-87%; a few targets
-  needed 30-50 starts). Inside the same loop: only the targets that need restarts pay for them;
+  needed 30-50 starts). Inside the same loop: only the targets that need restarts pay for
+  them, and the last targets' remaining starts run side by side (the answer is still the first
+  converging start's, in the order of the starts);
 * ``method="optax"``: minimises ``0.5 |e|^2`` with an optax optimiser (default: L-BFGS with a
   backtracking line search; any ``GradientTransformation`` works), projected onto the joint
   limits after every update, from all seeds at once (``vmap``), keeping the best. The loss has
@@ -209,22 +211,34 @@ DEFAULT_NUM_SEEDS = 64
 
 
 class _Lane(NamedTuple):
-    """One LM worker: the target it works on (``job``; ``N`` when idle) and its iterate."""
+    """One LM worker: the start it runs (start ``seed`` of target ``job``; ``job == N`` when the
+    lane is idle) and its iterate."""
 
     job: jax.Array
-    seed: jax.Array  # index of the current start
+    seed: jax.Array
     q: jax.Array
     e: jax.Array  # residual at q
     J: jax.Array  # Jacobian at q
     err: jax.Array  # |e|^2 at q (inf: q is a new start, not evaluated yet)
     lam: jax.Array
-    seed_steps: jax.Array  # steps from the current start
+    seed_steps: jax.Array  # steps from this start
     stall: jax.Array  # consecutive steps without real progress
-    steps: jax.Array  # LM steps on this job, all starts
-    best_q: jax.Array
+    best_q: jax.Array  # best configuration of this start
     best_err: jax.Array
-    best_seed: jax.Array
-    hit_max: jax.Array  # some start of this job ran out of steps while still progressing
+    hit_max: jax.Array  # this start ran out of steps while still progressing
+
+
+class _Targets(NamedTuple):
+    """What the LM queue knows of each target, (N + 1, ...) each (row N: idle lanes' dummy)."""
+
+    q: jax.Array  # the answer so far: the first converged start's q, else the best start's
+    err: jax.Array  # |e|^2 of that q
+    seed: jax.Array  # the start that gave q
+    hit_max: jax.Array  # int32 > 0: some start ran out of steps while still progressing
+    steps: jax.Array  # LM steps on this target, all starts
+    win: jax.Array  # the smallest converged start (S: none yet)
+    handed: jax.Array  # starts handed out so far (S: no more; also set for unreachable)
+    running: jax.Array  # lanes working on it now
 
 
 class _Limits(NamedTuple):
@@ -253,14 +267,12 @@ def _project(q: jax.Array, lim: _Limits) -> jax.Array:
     return jnp.clip(jnp.where(lim.wraps & over, wrapped, q), lim.lo, lim.hi)
 
 
-def _lm_lane_step(robot, f, T_target, start, unreachable, lane: _Lane, c) -> tuple[_Lane, Any]:
-    """One Levenberg-Marquardt iteration of one lane (one forward pass, at the trial point);
-    returns the lane and whether its job is finished.
-
-    A start runs until it converges, stalls or spends ``max_steps``; then the lane restarts
-    from the job's next start (``start(job, s)``), as TRAC-IK does, until none is left.
-    """
-    lim, tol2, max_steps, lam0, patience, lam_min, lam_max, S = c
+def _lm_lane_step(robot, f, T_target, unreachable, lane: _Lane, c):
+    """One Levenberg-Marquardt iteration of one lane's start (one forward pass, at the trial
+    point). Returns ``(lane, done, converged, stepped)``: the start is done when it converged,
+    stalled, spent ``max_steps`` or its target is unreachable; ``stepped``: a step was taken (not
+    the evaluation of a new start)."""
+    lim, tol2, max_steps, lam0, patience, lam_min, lam_max = c
     fresh = ~(lane.err < jnp.inf)
     # A fresh start is evaluated where it is; otherwise step from q and test the trial point.
     # Active set: a clipped joint at a limit, pushed outwards by the gradient, sits this out.
@@ -273,140 +285,222 @@ def _lm_lane_step(robot, f, T_target, start, unreachable, lane: _Lane, c) -> tup
     err_trial = jnp.sum(e_trial * e_trial)
     accept = fresh | (jnp.isfinite(err_trial) & (err_trial < lane.err))
     q = jnp.where(accept, q_trial, lane.q)
-    e = jnp.where(accept, e_trial, lane.e)
-    J = jnp.where(accept, J_trial, lane.J)
     err = jnp.where(accept, err_trial, lane.err)
     lam = jnp.where(
         fresh, lam0, jnp.where(accept, jnp.maximum(lane.lam * 0.1, lam_min), lane.lam * 10.0)
     )
-    real = (~fresh).astype(jnp.int32)
-    steps = lane.steps + real
-    seed_steps = lane.seed_steps + real
+    seed_steps = lane.seed_steps + (~fresh).astype(jnp.int32)
     gain = jnp.where(accept & ~fresh, (lane.err - err_trial) / jnp.maximum(lane.err, 1e-300), 0.0)
     # Progress: a relative decrease of |e|^2 of at least 1e-3, or a rejected step while lambda
     # can still grow, resets the stall counter.
     progress = (gain > 1e-3) | (~fresh & ~accept & (lam < lam_max))
     stall = jnp.where(fresh | progress, 0, lane.stall + 1)
     better = err < lane.best_err  # q is always within the limits
-    best_q = jnp.where(better, q, lane.best_q)
-    best_err = jnp.where(better, err, lane.best_err)
-    best_seed = jnp.where(better, lane.seed, lane.best_seed)
     converged = err <= tol2
-    out_of_steps = seed_steps >= max_steps
     stuck = (stall >= patience) | (lam >= lam_max) | ~jnp.isfinite(err)
-    start_over = ~converged & (out_of_steps | stuck)
-    hit_max = lane.hit_max | (start_over & ~stuck)
-    has_next = lane.seed + 1 < S
-    finished = converged | unreachable | (start_over & ~has_next)
-    restart = start_over & has_next
-    seed = jnp.where(restart, lane.seed + 1, lane.seed)
-    lane = _Lane(
-        job=lane.job,
-        seed=seed,
-        q=jnp.where(restart, start(lane.job, seed), q),
-        e=e,
-        J=J,
-        err=jnp.where(restart, jnp.inf, err),
+    give_up = ~converged & ((seed_steps >= max_steps) | stuck)
+    lane = lane._replace(
+        q=q,
+        e=jnp.where(accept, e_trial, lane.e),
+        J=jnp.where(accept, J_trial, lane.J),
+        err=err,
         lam=lam,
-        seed_steps=jnp.where(restart, 0, seed_steps),
-        stall=jnp.where(restart, 0, stall),
-        steps=steps,
-        best_q=best_q,
-        best_err=best_err,
-        best_seed=best_seed,
-        hit_max=hit_max,
+        seed_steps=seed_steps,
+        stall=stall,
+        best_q=jnp.where(better, q, lane.best_q),
+        best_err=jnp.where(better, err, lane.best_err),
+        hit_max=give_up & ~stuck,
     )
-    return lane, finished
+    return lane, converged | unreachable | give_up, converged, ~fresh
 
 
-def _new_lanes(job, q, dtype) -> _Lane:
-    B, n = q.shape
+def _idle_lanes(B: int, n: int, N: int, dtype) -> _Lane:
+    """``B`` idle lanes (``job == N``) for a robot with ``n`` joints."""
     zero = jnp.zeros(B, jnp.int32)
+    q = jnp.zeros((B, n), dtype)
     inf = jnp.full(B, jnp.inf, dtype)
     return _Lane(
-        job,
-        zero,
-        q,
-        jnp.zeros((B, 6), dtype),
-        jnp.zeros((B, 6, n), dtype),
-        inf,
-        jnp.ones(B, dtype),
-        zero,
-        zero,
-        zero,
-        q,
-        inf,
-        zero,
-        jnp.zeros(B, bool),
+        job=jnp.full(B, N, jnp.int32),
+        seed=zero,
+        q=q,
+        e=jnp.zeros((B, 6), dtype),
+        J=jnp.zeros((B, 6, n), dtype),
+        err=inf,
+        lam=jnp.ones(B, dtype),
+        seed_steps=zero,
+        stall=zero,
+        best_q=q,
+        best_err=inf,
+        hit_max=jnp.zeros(B, bool),
     )
+
+
+def _begin(lane: _Lane, free: jax.Array, job: jax.Array, seed: jax.Array, q: jax.Array) -> _Lane:
+    """Lanes where ``free``: start ``seed`` of target ``job`` from ``q`` (idle when ``job == N``).
+    Only what a new start reads is reset; ``e``, ``J`` and ``lam`` are set by its first
+    evaluation."""
+
+    def pick(new, old):
+        return jnp.where(free.reshape((-1,) + (1,) * (old.ndim - 1)), new, old)
+
+    zero = jnp.zeros_like(lane.stall)
+    inf = jnp.full_like(lane.err, jnp.inf)
+    return lane._replace(
+        job=pick(job, lane.job),
+        seed=pick(seed, lane.seed),
+        q=pick(q, lane.q),
+        err=pick(inf, lane.err),
+        seed_steps=pick(zero, lane.seed_steps),
+        stall=pick(zero, lane.stall),
+        best_q=pick(q, lane.best_q),
+        best_err=pick(inf, lane.best_err),
+        hit_max=lane.hit_max & ~free,
+    )
+
+
+def _hand_out(free, going_on, tg: _Targets, queue, N: int, S: int):
+    """Work for the ``free`` lanes (B,): ``(job, seed, tg, queue)``, ``job == N`` for a lane left
+    idle; ``queue = (next_job, turn)``.
+
+    In order of priority: (1) a lane whose start failed (``going_on``: its target, else N) goes
+    on with its target's next start, unless another lane still works on that target (one lane
+    per target goes on); (2) targets not yet started, in order from ``next_job``, with their
+    start 0; (3) once every target has started, further starts of the targets still being
+    solved (none converged, starts left), handed round-robin from where the last round stopped
+    (``turn``), so that a hard target's remaining starts run side by side at the end instead of
+    one after another.
+    """
+    next_job, turn = queue
+    B = free.shape[0]
+    ix = jnp.arange(B, dtype=jnp.int32)
+    at = jnp.where(going_on < N, going_on, N)
+    open_ = (going_on < N) & (tg.win[at] == S) & (tg.handed[at] < S) & (tg.running[at] == 0)
+    first = jnp.full(N + 1, B, jnp.int32).at[jnp.where(open_, at, N)].min(ix)
+    go_on = open_ & (first[at] == ix)
+    rest = free & ~go_on
+    rank = jnp.cumsum(rest.astype(jnp.int32)) - 1
+    n_new = N - next_job
+    new = rest & (rank < n_new)
+    extra = jnp.maximum(rank - n_new, 0)
+    n_extra = jnp.sum(rest & ~new, dtype=jnp.int32)
+
+    handed = tg.handed.at[jnp.where(go_on, at, N)].add(1)
+
+    def extra_starts():
+        # The targets still being solved, numbered 0..m-1; extra lane e takes (turn + e) % m.
+        t = jnp.arange(N, dtype=jnp.int32)
+        solving = (t < next_job) & (tg.win[:N] == S) & (handed[:N] < S)
+        m = jnp.maximum(jnp.sum(solving, dtype=jnp.int32), 1)
+        pos = jnp.cumsum(solving.astype(jnp.int32)) - 1
+        by_pos = jnp.full(N, N, jnp.int32).at[jnp.where(solving, pos, N)].set(t, mode="drop")
+        t0 = turn % m
+        r = t0 + extra
+        p = r % m
+        # lanes given the same target this round (the round wraps around) take its next starts
+        dup = r // m - (p < t0)
+        return by_pos[p], dup, (t0 + n_extra) % m
+
+    # Only once every target has started and a lane is left over: an O(N) pass.
+    other, dup, turn = jax.lax.cond(
+        n_extra > 0, extra_starts, lambda: (jnp.full_like(rank, N), jnp.zeros_like(rank), turn)
+    )
+    seed = jnp.where(go_on, tg.handed[at], jnp.where(new, 0, handed[other] + dup))
+    job = jnp.where(go_on, at, jnp.where(new, next_job + rank, other))
+    job = jnp.where(free & (job < N) & (seed < S), job, N).astype(jnp.int32)
+    to = jnp.where((job < N) & ~go_on, job, N)
+    tg = tg._replace(
+        handed=handed.at[to].add(1), running=tg.running.at[jnp.where(job < N, job, N)].add(1)
+    )
+    next_job = jnp.minimum(next_job + jnp.sum(new, dtype=jnp.int32), N).astype(jnp.int32)
+    return job, seed.astype(jnp.int32), tg, (next_job, turn.astype(jnp.int32))
 
 
 def _lm_queue(robot, T_all, start, S, unreachable, f, tol, max_steps, lam0, patience, lanes):
     """Levenberg-Marquardt for N targets on ``lanes`` workers (one jitted ``while_loop``).
 
-    Each lane works on one target at a time, trying its starts in turn (``start(job, s)``, ``s <
-    S``); when it finishes (reached, or out of starts) it takes the next unsolved target. Targets
-    differ widely in the steps they need (a median of about 15, a tail of hundreds with
-    restarts): with one lane per target a vmapped loop runs every lane until the slowest
-    finishes, while a few persistent lanes keep busy and the total work stays close to the sum
-    of the steps actually needed.
+    A lane runs one start of one target at a time (``start(job, s)``, ``s < S``); when the start
+    ends it takes new work (:func:`_hand_out`): its own target's next start, the next target not
+    yet started, or, once all have started, a further start of a target still being solved.
+    Targets differ widely in the work they need (a median of about 15 steps, a tail of hundreds
+    over many starts): one lane per target would keep the batch iterating until the slowest
+    finished, and one target's starts tried one after another would do the same at the end of
+    the queue; persistent lanes keep busy, and the last targets' starts run side by side.
+
+    The answer is the one of trying the starts in turn, whatever the number of lanes (up to
+    rounding): the converged start with the smallest index (a start with a larger one still
+    running is abandoned), else the best of all ``S`` starts (of equal ones, the first).
+    ``steps`` counts every step taken on the target, abandoned starts included.
     """
     N = T_all.shape[0]
     dtype = T_all.dtype
     is64 = jnp.finfo(dtype).bits == 64
-    c = (
-        _limits(robot, dtype),
-        tol * tol,
-        max_steps,
-        lam0,
-        patience,
-        1e-12 if is64 else 1e-6,
-        1e10,
-        S,
-    )
+    c = (_limits(robot, dtype), tol * tol, max_steps, lam0, patience, 1e-12 if is64 else 1e-6, 1e10)
     # Index N is an idle lane's dummy target.
     T_pad = jnp.concatenate([T_all, jnp.eye(4, dtype=dtype)[None]], 0)
     unr_pad = jnp.concatenate([unreachable, jnp.ones(1, bool)], 0)
-    step = jax.vmap(lambda T, u, ln: _lm_lane_step(robot, f, T, start, u, ln, c))
+    step = jax.vmap(lambda T, u, ln: _lm_lane_step(robot, f, T, u, ln, c))
+    starts = jax.vmap(start)
     n = robot.dof
-    res0 = (
-        jnp.zeros((N + 1, n), dtype),  # best q
-        jnp.zeros(N + 1, jnp.int32),  # steps
-        jnp.zeros(N + 1, jnp.int32),  # seed
-        jnp.zeros(N + 1, bool),  # hit_max
+    zeros = jnp.zeros(N + 1, jnp.int32)
+    tg0 = _Targets(
+        q=jnp.zeros((N + 1, n), dtype),
+        err=jnp.full(N + 1, jnp.inf, dtype),
+        seed=jnp.full(N + 1, S, jnp.int32),
+        hit_max=zeros,
+        steps=zeros,
+        win=jnp.full(N + 1, S, jnp.int32),
+        handed=zeros,
+        running=zeros,
     )
-    first = jax.vmap(lambda j: start(j, jnp.zeros((), jnp.int32)))
 
     def cond(carry):
         lane, _, _ = carry
         return jnp.any(lane.job < N)
 
     def body(carry):
-        lane, res, next_job = carry
-        new, finished = step(T_pad[lane.job], unr_pad[lane.job], lane)
-        finished = finished & (lane.job < N)
-        idx = jnp.where(finished, lane.job, N)
-        res = (
-            res[0].at[idx].set(new.best_q),
-            res[1].at[idx].set(new.steps),
-            res[2].at[idx].set(new.best_seed),
-            res[3].at[idx].set(new.hit_max),
+        lane, tg, queue = carry
+        busy = lane.job < N
+        new, done, conv, stepped = step(T_pad[lane.job], unr_pad[lane.job], lane)
+        done = done & busy
+        conv = conv & done
+        failed = done & ~conv
+        at = lane.job  # N for idle lanes: their updates land in the dummy row
+        win = tg.win.at[jnp.where(conv, at, N)].min(lane.seed)
+        # A failed start's best counts while no start of its target has converged; of equal
+        # ones the smaller start wins, as if the starts had been tried in turn.
+        failed_open = failed & (win[at] == S)
+        err = tg.err.at[jnp.where(failed_open, at, N)].min(new.best_err)
+        tie = failed_open & (err[at] == new.best_err)
+        seed = tg.seed.at[jnp.where(tie & (new.best_err < tg.err[at]), at, N)].set(S)
+        seed = seed.at[jnp.where(tie, at, N)].min(lane.seed)
+        first_converged = conv & (win[at] == lane.seed)
+        seed = seed.at[jnp.where(first_converged, at, N)].set(lane.seed)
+        to = jnp.where(first_converged | (tie & (seed[at] == lane.seed)), at, N)
+        # Abandon starts whose target converged from a start with a smaller index.
+        abandon = busy & ~done & (win[at] < lane.seed)
+        tg = _Targets(
+            q=tg.q.at[to].set(new.best_q),
+            err=err.at[to].set(new.best_err),
+            seed=seed,
+            hit_max=tg.hit_max.at[at].add((failed & new.hit_max).astype(jnp.int32)),
+            steps=tg.steps.at[at].add((busy & stepped).astype(jnp.int32)),
+            win=win,
+            handed=tg.handed.at[jnp.where(done & unr_pad[at], at, N)].set(S),
+            running=tg.running.at[at].add(-(done | abandon).astype(jnp.int32)),
         )
-        rank = jnp.cumsum(finished.astype(jnp.int32)) - 1
-        cand = next_job + rank
-        job = jnp.where(finished, jnp.where(cand < N, cand, N), lane.job).astype(jnp.int32)
-        fresh = _new_lanes(job, first(job), dtype)
-        lane = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(finished.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), fresh, new
-        )
-        next_job = jnp.minimum(next_job + jnp.sum(finished, dtype=jnp.int32), N).astype(jnp.int32)
-        return lane, res, next_job
+        free = ~busy | done | abandon
+        job, seed, tg, queue = _hand_out(free, jnp.where(failed, at, N), tg, queue, N, S)
+        return _begin(new, free, job, seed, starts(job, seed)), tg, queue
 
     B = lanes
-    job0 = jnp.minimum(jnp.arange(B, dtype=jnp.int32), N)
-    lane0 = _new_lanes(job0, first(job0), dtype)
-    _, res, _ = jax.lax.while_loop(cond, body, (lane0, res0, jnp.asarray(min(B, N), jnp.int32)))
-    return tuple(r[:N] for r in res)
+    free0 = jnp.ones(B, bool)
+    none = jnp.full(B, N, jnp.int32)
+    zero = jnp.zeros((), jnp.int32)
+    job0, seed0, tg0, queue0 = _hand_out(free0, none, tg0, (zero, zero), N, S)
+    idle = _idle_lanes(B, n, N, dtype)
+    lane0 = _begin(idle, free0, job0, seed0, starts(job0, seed0))
+    _, tg, _ = jax.lax.while_loop(cond, body, (lane0, tg0, queue0))
+    return tg.q[:N], tg.steps[:N], tg.seed[:N], tg.hit_max[:N] > 0
 
 
 # ----------------------------------------------------------------------------- optax
@@ -651,8 +745,10 @@ def solve_ik(
       patience: a start is abandoned (``stalled``) after this many steps without a relative
         decrease of ``|e|^2`` of 1e-3 (LM) or 1e-4 (optax).
       lanes: LM only: the number of parallel workers for a batch (default: N up to 64, then
-        N / 8, at least 64). Each works through targets one after another, so a few hard
-        targets do not keep the whole batch iterating. Results agree up to rounding.
+        N / 8, at least 64). Each runs one start at a time and then takes the next piece of
+        work, so a few hard targets do not keep the whole batch iterating; at the end the
+        remaining starts of the last targets run side by side. The answer does not depend on
+        it (up to rounding): the first converging start in the order of the starts wins.
       throw: raise :class:`IKError` if any target did not converge (default); ``False`` returns
         the :class:`RESULTS` codes in ``result`` instead.
 
