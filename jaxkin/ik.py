@@ -358,9 +358,10 @@ def _begin(lane: _Lane, free: jax.Array, job: jax.Array, seed: jax.Array, q: jax
     )
 
 
-def _hand_out(free, going_on, tg: _Targets, queue, N: int, S: int):
+def _hand_out(free, going_on, holding, tg: _Targets, queue, N: int, S: int):
     """Work for the ``free`` lanes (B,): ``(job, seed, tg, queue)``, ``job == N`` for a lane left
-    idle; ``queue = (next_job, turn)``.
+    idle; ``queue = (next_job, turn)``; ``holding``: the target of each lane that goes on with
+    its start (N for free lanes).
 
     In order of priority: (1) a lane whose start failed (``going_on``: its target, else N) goes
     on with its target's next start, unless another lane still works on that target (one lane
@@ -368,7 +369,8 @@ def _hand_out(free, going_on, tg: _Targets, queue, N: int, S: int):
     start 0; (3) once every target has started, further starts of the targets still being
     solved (none converged, starts left), handed round-robin from where the last round stopped
     (``turn``), so that a hard target's remaining starts run side by side at the end instead of
-    one after another.
+    one after another. By (1), every target still being solved is held by a lane: (3) looks
+    at the lanes (B), not at all N targets.
     """
     next_job, turn = queue
     B = free.shape[0]
@@ -383,16 +385,18 @@ def _hand_out(free, going_on, tg: _Targets, queue, N: int, S: int):
     new = rest & (rank < n_new)
     extra = jnp.maximum(rank - n_new, 0)
     n_extra = jnp.sum(rest & ~new, dtype=jnp.int32)
-
     handed = tg.handed.at[jnp.where(go_on, at, N)].add(1)
 
     def extra_starts():
-        # The targets still being solved, numbered 0..m-1; extra lane e takes (turn + e) % m.
-        t = jnp.arange(N, dtype=jnp.int32)
-        solving = (t < next_job) & (tg.win[:N] == S) & (handed[:N] < S)
+        # The targets still being solved (one holding lane each), numbered 0..m-1; extra lane
+        # e takes number (turn + e) % m.
+        t = jnp.where(go_on, at, holding)
+        solving = (t < N) & (tg.win[t] == S) & (handed[t] < S)
+        first = jnp.full(N + 1, B, jnp.int32).at[jnp.where(solving, t, N)].min(ix)
+        solving = solving & (first[t] == ix)
         m = jnp.maximum(jnp.sum(solving, dtype=jnp.int32), 1)
         pos = jnp.cumsum(solving.astype(jnp.int32)) - 1
-        by_pos = jnp.full(N, N, jnp.int32).at[jnp.where(solving, pos, N)].set(t, mode="drop")
+        by_pos = jnp.full(B, N, jnp.int32).at[jnp.where(solving, pos, B)].set(t, mode="drop")
         t0 = turn % m
         r = t0 + extra
         p = r % m
@@ -400,7 +404,7 @@ def _hand_out(free, going_on, tg: _Targets, queue, N: int, S: int):
         dup = r // m - (p < t0)
         return by_pos[p], dup, (t0 + n_extra) % m
 
-    # Only once every target has started and a lane is left over: an O(N) pass.
+    # Only once every target has started and a lane is left over.
     other, dup, turn = jax.lax.cond(
         n_extra > 0, extra_starts, lambda: (jnp.full_like(rank, N), jnp.zeros_like(rank), turn)
     )
@@ -489,14 +493,15 @@ def _lm_queue(robot, T_all, start, S, unreachable, f, tol, max_steps, lam0, pati
             running=tg.running.at[at].add(-(done | abandon).astype(jnp.int32)),
         )
         free = ~busy | done | abandon
-        job, seed, tg, queue = _hand_out(free, jnp.where(failed, at, N), tg, queue, N, S)
+        holding = jnp.where(free, N, at)
+        job, seed, tg, queue = _hand_out(free, jnp.where(failed, at, N), holding, tg, queue, N, S)
         return _begin(new, free, job, seed, starts(job, seed)), tg, queue
 
     B = lanes
     free0 = jnp.ones(B, bool)
     none = jnp.full(B, N, jnp.int32)
     zero = jnp.zeros((), jnp.int32)
-    job0, seed0, tg0, queue0 = _hand_out(free0, none, tg0, (zero, zero), N, S)
+    job0, seed0, tg0, queue0 = _hand_out(free0, none, none, tg0, (zero, zero), N, S)
     idle = _idle_lanes(B, n, N, dtype)
     lane0 = _begin(idle, free0, job0, seed0, starts(job0, seed0))
     _, tg, _ = jax.lax.while_loop(cond, body, (lane0, tg0, queue0))
