@@ -57,8 +57,9 @@ def profile(name: str, n: int) -> str:
     return (
         f"{name}: {n} targets in {total * 1e3:.0f} ms = {total / n * 1e6:.0f} us per target; "
         f"{lanes} lanes; steps per target mean {steps.mean():.1f}, median {np.median(steps):.0f}, "
-        f"p99 {np.percentile(steps, 99):.0f}, max {steps.max()} (the loop runs at least that "
-        f"many iterations; the work would fill {steps.sum() / lanes:.0f}); targets restarted "
+        f"p99 {np.percentile(steps, 99):.0f}, max {steps.max()} (steps of abandoned parallel "
+        f"starts included); the work would fill {steps.sum() / lanes:.0f} iterations of all "
+        f"lanes; targets restarted "
         f"{100 * restarted.mean():.1f}%, their share of the steps "
         f"{100 * steps[restarted].sum() / steps.sum():.0f}%; wall time per lane-step if every "
         f"lane were busy {total / steps.sum() * 1e6:.2f} us; pose + Jacobian alone "
