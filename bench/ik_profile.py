@@ -8,13 +8,22 @@ fields; the wall time per lane-step if every lane were busy; and, for scale, the
 pose + Jacobian (``frame_jacobian``) per configuration on as many configurations as the solver
 has lanes.
 
-Usage: ``python3 -m bench.ik_profile [--n N]``.
+``--trace`` also records one solve with JAX's profiler (a Perfetto trace in a temporary
+directory) and prints, per iteration of the solver's loop (the count shared by most kernels),
+the number of compiled kernels (thunks) run, their summed time and the largest of them.
+
+Usage: ``python3 -m bench.ik_profile [--n N] [--trace]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import glob
+import gzip
+import json
 import os
+import tempfile
 import time
 
 import jax
@@ -67,13 +76,50 @@ def profile(name: str, n: int) -> str:
     )
 
 
+def kernels(name: str, n: int) -> str:
+    """Kernels per loop iteration of one traced solve (see the module doc)."""
+    robot = ROBOTS[name]()
+    qs = jk.sample_configurations(robot, n, jax.random.key(0))
+    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
+    lo, hi = jk.sampling_bounds(robot)
+    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
+    solve = jax.jit(lambda T: jk.solve_ik(robot, T, q0, throw=False))
+    jax.block_until_ready(solve(T))
+    with tempfile.TemporaryDirectory() as d:
+        jax.profiler.start_trace(d, create_perfetto_trace=True)
+        jax.block_until_ready(solve(T))
+        jax.profiler.stop_trace()
+        (path,) = glob.glob(os.path.join(d, "**", "*.trace.json.gz"), recursive=True)
+        with gzip.open(path) as f:
+            events = [e for e in json.load(f)["traceEvents"] if e.get("ph") == "X"]
+    total: collections.Counter[str] = collections.Counter()
+    count: collections.Counter[str] = collections.Counter()
+    for e in events:
+        if not e["name"].startswith(("Thunk", "$", "end: ")):
+            total[e["name"]] += e["dur"]
+            count[e["name"]] += 1
+    iters = collections.Counter(count.values()).most_common(1)[0][0]
+    loop = {k: v / iters for k, v in total.items() if count[k] == iters}
+    trig = sum(v for k, v in loop.items() if "sine" in k or "cosine" in k)
+    top = ", ".join(f"{k} {v:.0f}" for k, v in sorted(loop.items(), key=lambda kv: -kv[1])[:6])
+    return (
+        f"{name}: {iters} loop iterations; per iteration {len(loop)} kernels, "
+        f"{sum(loop.values()):.0f} us of kernel time (summed over threads), of which sin/cos "
+        f"kernels {trig:.0f} us; largest (us): {top}"
+    )
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=10_000)
+    p.add_argument("--trace", action="store_true", help="kernels per loop iteration")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     for name in ROBOTS:
         print(profile(name, args.n), flush=True)
+    if args.trace:
+        for name in ROBOTS:
+            print(kernels(name, args.n), flush=True)
 
 
 if __name__ == "__main__":
