@@ -39,3 +39,11 @@ def _x64_on():
     # A test may switch x64 off temporarily (precision-warning tests); make sure it comes back.
     yield
     jax.config.update("jax_enable_x64", True)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Heaviest test files first, so that the two xdist workers finish together
+    (tests/_schedule.py); the order within a file is kept."""
+    from _schedule import weight
+
+    items.sort(key=lambda item: -weight(str(item.path)))

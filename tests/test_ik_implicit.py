@@ -11,8 +11,6 @@ one). Tolerance: 1e-6 relative (the issue's target)."""
 
 from __future__ import annotations
 
-import os
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -23,12 +21,6 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import jaxkin as jk
-
-FULL = os.environ.get("JAXKIN_FULL_IK") == "1"
-"""Each robot here costs one IK compile (15-25 s of one core): the default run compiles the Panda,
-the UR5 and the traced UR5 of the robot-parameter tests; ``JAXKIN_FULL_IK=1`` adds the Niryo One
-(finite differences, protocol, least-squares limit case) and the float32 test."""
-full_only = pytest.mark.skipif(not FULL, reason="set JAXKIN_FULL_IK=1 (one more IK compile)")
 
 B = 300  # every call of a solver: one batch shape, one compile
 H = 1e-5
@@ -159,7 +151,7 @@ has perturbed targets outside the workspace). Every solution is checked against 
 ARM_PARAMS = [
     "panda",
     "ur5",
-    pytest.param("niryo_one", marks=full_only),
+    "niryo_one",
 ]
 
 
@@ -195,7 +187,7 @@ def test_active_limit_holds_the_joint(solvers):
     """Panda joint 4 at its upper limit in every solution (started there): its derivative is 0
     and the other six take the reduced Jacobian's inverse; Niryo One joint 5 at its limit (a
     6-dof arm with 5 free joints): the least-squares derivative (numpy lstsq)."""
-    for name, k in (("panda", 3), ("niryo_one", 4))[: 2 if FULL else 1]:
+    for name, k in (("panda", 3), ("niryo_one", 4)):
         solver = solvers(name)
         robot = solver.robot
         q_star, T = _random_targets(robot, 7, 10, at_limit=k)
@@ -409,7 +401,6 @@ def test_calibration_through_ik_recovers_the_tool_offset(calibration):
 
 
 # ----------------------------------------------------------------------------- float32, jit, vmap
-@full_only
 def test_float32_jacrev_under_jit_and_vmap(solvers):
     """``jit(vmap(jacrev(solve_ik(...).q)))`` on a float32 UR5: float32 derivatives, equal to the
     float64 ones within what a float32 solution allows (residual <= 1e-5, the float32 default
