@@ -111,24 +111,22 @@ def test_answers_do_not_depend_on_the_lanes():
         sol = jk.solve_ik(robot, T[idx], q0, seeds=seeds[idx], throw=False, **kw)
         return jax.tree_util.tree_map(np.asarray, sol)
 
-    every = np.arange(N_TARGETS)
-    one, many = solve(every, lanes=1), solve(every)
+    one = solve(np.arange(N_TARGETS), lanes=1)  # one start after another
     ok = one.converged
     assert 0 < np.sum(~ok) < 5  # a few targets fail all 16 starts
-    np.testing.assert_array_equal(many.converged, ok)
-    np.testing.assert_array_equal(many.seed[ok], one.seed[ok])
-    np.testing.assert_allclose(many.q[ok], one.q[ok], rtol=0, atol=1e-8)
+    # The 10 hardest solved targets and the failed ones alone, on 64 lanes: their starts run
+    # side by side, starts beyond the winning one are abandoned (their steps still count).
+    hard = np.argsort(-np.where(ok, one.seed, -1), kind="stable")[:10]
+    assert one.seed[hard].min() >= 2, one.seed[hard]
+    idx = np.concatenate([hard, np.flatnonzero(~ok)])
+    par = solve(idx, lanes=64)
+    np.testing.assert_array_equal(par.converged, ok[idx])
+    np.testing.assert_array_equal(par.seed[:10], one.seed[hard])
+    np.testing.assert_allclose(par.q[:10], one.q[hard], rtol=0, atol=1e-8)
+    assert np.all(par.steps >= one.steps[idx]) and np.any(par.steps[:10] > one.steps[hard])
     # a failed target's answer is its best start (two starts can end in one local minimum,
     # their residuals equal up to rounding, so which of them is reported may differ)
-    np.testing.assert_allclose(many.residual[~ok], one.residual[~ok], rtol=1e-9)
-    # The 12 hardest targets alone, with 64 lanes: their starts run in parallel, starts beyond
-    # the winning one are abandoned (their steps still count), the answer stays.
-    hard = np.argsort(-np.where(ok, one.seed, -1), kind="stable")[:12]
-    assert one.seed[hard].min() >= 2, one.seed[hard]
-    par = solve(hard, lanes=64)
-    np.testing.assert_array_equal(par.seed, one.seed[hard])
-    np.testing.assert_allclose(par.q, one.q[hard], rtol=0, atol=1e-8)
-    assert np.all(par.steps >= one.steps[hard]) and np.any(par.steps > one.steps[hard])
+    np.testing.assert_allclose(par.residual[10:], one.residual[~ok], rtol=1e-9)
 
 
 def test_num_seeds_1_is_exactly_one_start():
