@@ -32,7 +32,6 @@ import os
 import shutil
 import signal
 import sys
-import tempfile
 import threading
 import time
 import zipfile
@@ -678,11 +677,24 @@ class ResultWriter:
     def _open(self) -> None:
         parent, name = os.path.split(self.path)
         try:
+            for _ in range(100):
+                # The name is recorded before the temporary exists: a SIGTERM at any point from
+                # here on leaves abort() something to remove (tempfile's mkdtemp and mkstemp
+                # return the name only after creating it).
+                self.tmp = os.path.join(parent, f".{name}.{os.urandom(4).hex()}.tmp")
+                try:
+                    if self.format == "dir":
+                        os.mkdir(self.tmp, 0o700)
+                    else:
+                        fd = os.open(self.tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
+                    break
+                except FileExistsError:  # someone else's: not ours to remove
+                    self.tmp = None
+            else:
+                raise FileExistsError(17, "no free temporary name", self.path)
             if self.format == "dir":
-                self.tmp = tempfile.mkdtemp(prefix=f".{name}.", suffix=".tmp", dir=parent)
                 self._file.open(self.tmp)
             else:
-                fd, self.tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=parent)
                 self._file.open(os.fdopen(fd, "w+b"))
         except OSError as e:
             self.abort()
