@@ -39,13 +39,21 @@ ROBOTS = {
 }
 
 
-def profile(name: str, n: int) -> str:
+def problem(name: str, n: int):
+    """``(robot, qs, T, solve)``: n random reachable targets and the jitted default solve from
+    the middle of the limits, compiled (one call made)."""
     robot = ROBOTS[name]()
     qs = jk.sample_configurations(robot, n, jax.random.key(0))
     T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
     lo, hi = jk.sampling_bounds(robot)
     q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
     solve = jax.jit(lambda T: jk.solve_ik(robot, T, q0, throw=False))
+    jax.block_until_ready(solve(T))
+    return robot, qs, T, solve
+
+
+def profile(name: str, n: int) -> str:
+    robot, qs, T, solve = problem(name, n)
     sol = jax.block_until_ready(solve(T))
     times = []
     for _ in range(3):
@@ -78,13 +86,7 @@ def profile(name: str, n: int) -> str:
 
 def kernels(name: str, n: int) -> str:
     """Kernels per loop iteration of one traced solve (see the module doc)."""
-    robot = ROBOTS[name]()
-    qs = jk.sample_configurations(robot, n, jax.random.key(0))
-    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
-    lo, hi = jk.sampling_bounds(robot)
-    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
-    solve = jax.jit(lambda T: jk.solve_ik(robot, T, q0, throw=False))
-    jax.block_until_ready(solve(T))
+    _, _, T, solve = problem(name, n)
     with tempfile.TemporaryDirectory() as d:
         jax.profiler.start_trace(d, create_perfetto_trace=True)
         jax.block_until_ready(solve(T))

@@ -26,6 +26,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import errno
 import io
 import math
 import os
@@ -691,7 +692,7 @@ class ResultWriter:
                 except FileExistsError:  # someone else's: not ours to remove
                     self.tmp = None
             else:
-                raise FileExistsError(17, "no free temporary name", self.path)
+                raise FileExistsError(errno.EEXIST, "no free temporary name", self.path)
             if self.format == "dir":
                 self._file.open(self.tmp)
             else:

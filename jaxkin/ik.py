@@ -238,7 +238,6 @@ class _Targets(NamedTuple):
     steps: jax.Array  # LM steps on this target, all starts
     win: jax.Array  # the smallest converged start (S: none yet)
     handed: jax.Array  # starts handed out so far (S: no more; also set for unreachable)
-    running: jax.Array  # lanes working on it now
 
 
 class _Limits(NamedTuple):
@@ -376,7 +375,8 @@ def _hand_out(free, going_on, holding, tg: _Targets, queue, N: int, S: int):
     B = free.shape[0]
     ix = jnp.arange(B, dtype=jnp.int32)
     at = jnp.where(going_on < N, going_on, N)
-    open_ = (going_on < N) & (tg.win[at] == S) & (tg.handed[at] < S) & (tg.running[at] == 0)
+    held = jnp.zeros(N + 1, bool).at[holding].set(True)
+    open_ = (going_on < N) & (tg.win[at] == S) & (tg.handed[at] < S) & ~held[at]
     first = jnp.full(N + 1, B, jnp.int32).at[jnp.where(open_, at, N)].min(ix)
     go_on = open_ & (first[at] == ix)
     rest = free & ~go_on
@@ -412,9 +412,7 @@ def _hand_out(free, going_on, holding, tg: _Targets, queue, N: int, S: int):
     job = jnp.where(go_on, at, jnp.where(new, next_job + rank, other))
     job = jnp.where(free & (job < N) & (seed < S), job, N).astype(jnp.int32)
     to = jnp.where((job < N) & ~go_on, job, N)
-    tg = tg._replace(
-        handed=handed.at[to].add(1), running=tg.running.at[jnp.where(job < N, job, N)].add(1)
-    )
+    tg = tg._replace(handed=handed.at[to].add(1))
     next_job = jnp.minimum(next_job + jnp.sum(new, dtype=jnp.int32), N).astype(jnp.int32)
     return job, seed.astype(jnp.int32), tg, (next_job, turn.astype(jnp.int32))
 
@@ -454,7 +452,6 @@ def _lm_queue(robot, T_all, start, S, unreachable, f, tol, max_steps, lam0, pati
         steps=zeros,
         win=jnp.full(N + 1, S, jnp.int32),
         handed=zeros,
-        running=zeros,
     )
 
     def cond(carry):
@@ -490,7 +487,6 @@ def _lm_queue(robot, T_all, start, S, unreachable, f, tol, max_steps, lam0, pati
             steps=tg.steps.at[at].add((busy & stepped).astype(jnp.int32)),
             win=win,
             handed=tg.handed.at[jnp.where(done & unr_pad[at], at, N)].set(S),
-            running=tg.running.at[at].add(-(done | abandon).astype(jnp.int32)),
         )
         free = ~busy | done | abandon
         holding = jnp.where(free, N, at)

@@ -123,7 +123,8 @@ def test_answers_do_not_depend_on_the_lanes():
     np.testing.assert_array_equal(par.converged, ok[idx])
     np.testing.assert_array_equal(par.seed[:10], one.seed[hard])
     np.testing.assert_allclose(par.q[:10], one.q[hard], rtol=0, atol=1e-8)
-    assert np.all(par.steps >= one.steps[idx]) and np.any(par.steps[:10] > one.steps[hard])
+    # (a failed start's length in a local minimum can move by a few steps with the rounding)
+    assert np.all(par.steps[:10] >= one.steps[hard]) and np.any(par.steps[:10] > one.steps[hard])
     # a failed target's answer is its best start (two starts can end in one local minimum,
     # their residuals equal up to rounding, so which of them is reported may differ)
     np.testing.assert_allclose(par.residual[10:], one.residual[~ok], rtol=1e-9)
@@ -158,6 +159,17 @@ def test_explicit_seeds_are_the_only_starts():
     many = jk.solve_ik(planar, T, q0, max_steps=200, throw=False)
     assert int(many.result) == RESULTS.stalled
     assert 3 * 200 < int(many.steps) <= jk.ik.DEFAULT_NUM_SEEDS * 200
+
+
+def test_equal_failed_starts_report_the_first():
+    """Starts that end in the same local minimum, run side by side on several lanes: the
+    reported start is the first of them, as if they had been tried in turn."""
+    planar = jk.robots.load("two_link_planar", dtype=np.float64)
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 0.5, 0.3]  # out of the arm's plane: every start stalls
+    q0 = np.array([0.1, 0.2])
+    sol = jk.solve_ik(planar, T, q0, seeds=np.tile(q0, (5, 1)), lanes=6, max_steps=200, throw=False)
+    assert int(sol.result) == RESULTS.stalled and int(sol.seed) == 0
 
 
 # A small spatial arm (z, y, y axes, then a tool offset), written to a file by the test.
