@@ -21,10 +21,10 @@ What is drawn, in world coordinates (those of ``jk.fk_all``; ``robot.base`` is T
   name becomes ``_``), with its x, y, z axes; its pose is ``fk_all(robot, q)[i]``;
 * meshes: for a robot loaded from a URDF file, each link's ``<visual>`` meshes
   (``<mesh filename=... scale=...>``, with the visual's ``<origin>`` and ``<material>`` colour)
-  as children ``/robot/<frame>/visual_<k>``. ``package://pkg/rest`` is looked up in the
-  directories above the URDF file and in example-robot-data's ``share`` folder. A robot from
-  :func:`jaxkin.robots.load` (``"erd/..."``) finds its file by itself; otherwise pass ``urdf=``
-  (the path the robot was loaded from). ``<box>``, ``<cylinder>`` and ``<sphere>`` visuals are
+  as children ``/robot/<frame>/visual_<k>``. A robot from :func:`jaxkin.robots.load`
+  (``"erd/..."``) finds its file by itself; otherwise pass ``urdf=`` (the path the robot was
+  loaded from). Mesh files are read only from the places the user named (see "Where meshes are
+  read from" below). ``<box>``, ``<cylinder>`` and ``<sphere>`` visuals are
   drawn too. For a robot loaded from an MJCF file (:func:`jaxkin.load_mjcf`), MuJoCo compiles
   the file *with* its mesh files and each visual geom of a body of ``robot.frame_names`` is
   drawn as ``/robot/<body>/visual_<k>`` (k: the geom's order in its body) at the geom's
@@ -33,10 +33,12 @@ What is drawn, in world coordinates (those of ``jk.fk_all``; ``robot.base`` is T
   ellipsoids, capsules and cylinders. Collision-only geoms are skipped by MuJoCo's conventions:
   ``geom_group`` >= 3 (groups MuJoCo's viewer hides) or alpha 0; planes and height fields are
   not drawn. A robot from ``jk.robots.load("mjcf/...")`` finds its file by itself; otherwise
-  pass ``mjcf=``. Missing mesh files (urdf or mjcf) raise :class:`ViewerError`, which names the
-  file; ``meshes=False`` draws segments instead. A robot without meshes (DH zoo robots, a robot
-  loaded from an XML string) is drawn as segments from each joint's parent frame origin to its
-  child frame origin (``/robot/links``);
+  pass ``mjcf=``. The file is pre-read as :func:`jaxkin.load_mjcf` does
+  (:func:`jaxkin.mjcf.check_files`), and an asset file (mesh, height field, skin, texture) that
+  is not a regular file is refused before MuJoCo reads it. Missing mesh files (urdf or mjcf)
+  raise :class:`ViewerError`, which names the file; ``meshes=False`` draws segments instead.
+  A robot without meshes (DH zoo robots, a robot loaded from an XML string) is drawn as
+  segments from each joint's parent frame origin to its child frame origin (``/robot/links``);
 * with ``qd``, the twist of the default frame (``jk.twist``, ``world_aligned``: the frame
   origin's velocity in world axes): ``/robot/twist_v`` (red, ``v`` in m/s) and
   ``/robot/twist_omega`` (blue, ``omega`` in rad/s), both drawn from the frame origin,
@@ -47,6 +49,32 @@ What is drawn, in world coordinates (those of ``jk.fk_all``; ``robot.base`` is T
 
 Twist and ellipsoid are drawn for ``frame=`` or, when it is ``None``, for the robot's default
 frame; a robot without one (branching trees) shows neither until ``frame=`` is given.
+
+The camera opens framing the robot at the first ``q`` (:func:`camera_framing` of the frame
+origins and the corners of the meshes' bounding boxes): it looks at the centre of their
+bounding box from the front, right and above, far enough for the whole box to be in view.
+
+Where meshes are read from
+--------------------------
+A URDF file is untrusted input: its mesh paths are resolved within these places only, the
+*package roots*:
+
+* ``package://pkg/rest``: the directory of ``packages[pkg]`` when ``packages=`` names ``pkg``;
+  else the URDF file's directory or its parent (:data:`PARENT_LEVELS` = 1 level up: the
+  package of a ROS layout ``pkg/urdf/robot.urdf``) when it is named ``pkg``, or a directory
+  ``pkg`` inside one of these two; else ``pkg`` in example-robot-data's ``share`` folder.
+  Nothing further up is searched. ``rest`` must stay inside that package root once ``..`` and
+  symbolic links are resolved.
+* a plain or ``file://`` path (relative to the URDF's directory, or absolute) must lie inside
+  the URDF's directory or its parent, a directory of ``packages=``, or example-robot-data's
+  ``share`` folder.
+* the file must be a regular file whose suffix is one of a mesh format (``.stl``, ``.obj``,
+  ``.dae``, ``.ply``, ``.off``, ``.glb``, ``.gltf``; any case).
+
+A mesh path that breaks one of these rules is never opened: its link is drawn without it, with
+one :class:`MeshPathWarning` naming the path. A path inside these places that does not exist
+raises :class:`ViewerError`. Keep a downloaded robot in a directory of its own (its parent
+directory is read from), and name packages found elsewhere with ``packages=``.
 
 Example (starts a server, so not run as a doctest)::
 
@@ -60,10 +88,14 @@ Example (starts a server, so not run as a doctest)::
 
 from __future__ import annotations
 
+import math
 import os
 import socket
+import stat
 import time
+import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -76,10 +108,21 @@ from .analysis import velocity_ellipsoid
 from .errors import JaxkinError
 from .jacobians import geometric_jacobian
 from .kinematics import fk_all
+from .mjcf import MAX_BODIES, check_files
 from .model import Robot
 from .velocity import twist
 
-__all__ = ["View", "ViewerDependencyError", "ViewerError", "Visual", "show", "urdf_visuals"]
+__all__ = [
+    "PARENT_LEVELS",
+    "MeshPathWarning",
+    "View",
+    "ViewerDependencyError",
+    "ViewerError",
+    "Visual",
+    "camera_framing",
+    "show",
+    "urdf_visuals",
+]
 
 _INSTALL = "pip install 'jaxkin[viewer]'"
 _GREY = (170, 170, 180)
@@ -95,6 +138,18 @@ class ViewerDependencyError(JaxkinError, ImportError):
 
 class ViewerError(JaxkinError):
     """A viewer input jaxkin cannot show (a URDF file that is missing, a trajectory's shape)."""
+
+
+class MeshPathWarning(UserWarning):
+    """A URDF mesh path outside the package roots (module doc, "Where meshes are read from"),
+    not a regular file or not a mesh format: the mesh is skipped, the file never opened."""
+
+
+PARENT_LEVELS = 1
+"""How many directories above the URDF file's own are searched for packages and may hold
+meshes (module doc, "Where meshes are read from")."""
+
+_MESH_SUFFIXES = frozenset({".stl", ".obj", ".dae", ".ply", ".off", ".glb", ".gltf"})
 
 
 def _viser():
@@ -136,44 +191,98 @@ def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(float(v) for v in text.split())
 
 
-def _package_roots(urdf: Path) -> list[Path]:
-    roots = list(urdf.parent.resolve().parents)
-    roots.insert(0, urdf.parent.resolve())
+def _erd_share() -> Path | None:
+    """example-robot-data's ``share`` folder (None when it is not installed)."""
     try:
         from .robots import example_robot_data
 
-        roots.append(Path(example_robot_data.robots_dir()).parent.parent)
-    except Exception:  # not installed: the URDF's own directories only
-        pass
-    return roots
+        return Path(example_robot_data.robots_dir()).parent.parent.resolve()
+    except Exception:  # not installed
+        return None
 
 
-def _resolve(filename: str, urdf: Path, roots: list[Path]) -> Path:
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
+class _Places:
+    """The package roots of one URDF file (module doc, "Where meshes are read from")."""
+
+    def __init__(self, urdf: Path, packages: Mapping[str, Any] | None) -> None:
+        here = urdf.parent.resolve()
+        share = _erd_share()
+        self.urdf = urdf
+        self.near = [here, *list(here.parents)[:PARENT_LEVELS]]
+        self.packages = {
+            str(k): Path(v).expanduser().resolve() for k, v in dict(packages or {}).items()
+        }
+        self.shared = [share] if share is not None else []
+        self.roots = [self.near[-1], *self.packages.values(), *self.shared]
+
+    def package(self, name: str) -> Path | None:
+        """The root of package ``name`` (None: not in these places)."""
+        if name in self.packages:
+            return self.packages[name]
+        for d in self.near:
+            if d.name == name:
+                return d
+        for d in (*self.near, *self.shared):
+            if (d / name).is_dir():
+                return d / name
+        return None
+
+
+def _skip(message: str) -> None:
+    warnings.warn(MeshPathWarning(f"{message}; the mesh is skipped, never read."), stacklevel=5)
+
+
+def _inside(path: Path, roots: list[Path]) -> bool:
+    return any(path.is_relative_to(os.path.realpath(r)) for r in roots)
+
+
+def _resolve(filename: str, places: _Places) -> Path | None:
+    """The real path of the mesh file ``filename`` names, or None (skipped with a warning:
+    outside the package roots, not a regular file, not a mesh format; module doc)."""
+    where = f"{places.urdf}: mesh {filename!r}"
     if filename.startswith("package://"):
-        rest = filename[len("package://") :]
-        package, _, inner = rest.partition("/")
-        candidates = []
-        for root in roots:
-            candidates += [root / rest, root / inner]
-            if root.name == package:
-                candidates.append(root / inner)
+        package, _, inner = filename[len("package://") :].partition("/")
+        if package in ("", ".", ".."):
+            return _skip(f"{where} names no package")
+        root = places.package(package)
+        if root is None:
+            looked = [str(d) for d in places.near + places.shared]
+            raise ViewerError(
+                f"{where} not found: no package {package!r} at or in {looked}; pass "
+                f"packages={{{package!r}: '<its directory>'}} to jaxkin.viewer.show, install the "
+                "package that ships it, or pass meshes=False to draw link segments instead."
+            )
+        path, roots, what = root / inner, [root], f"the package root {str(root)!r}"
     else:
-        p = Path(filename)
-        candidates = [p] if p.is_absolute() else [urdf.parent / p]
-    for c in candidates:
-        if c.is_file():
-            return c
-    raise ViewerError(
-        f"{urdf}: mesh {filename!r} not found (looked in {[str(c) for c in candidates[:6]]}"
-        f"{' ...' if len(candidates) > 6 else ''}); install the package that ships it or "
-        "pass meshes=False to draw link segments instead."
-    )
+        rest = Path(filename[len("file://") :] if filename.startswith("file://") else filename)
+        path = rest if rest.is_absolute() else places.urdf.parent / rest
+        roots = places.roots
+        what = f"the places meshes are read from {[str(r) for r in roots]}"
+    real = Path(os.path.realpath(path))
+    if not _inside(real, roots):
+        return _skip(f"{where} resolves to {str(real)!r}, outside {what}")
+    if real.suffix.lower() not in _MESH_SUFFIXES:
+        return _skip(f"{where} is not a mesh file (suffix not one of {sorted(_MESH_SUFFIXES)})")
+    try:
+        mode = os.stat(real).st_mode
+    except OSError:
+        raise ViewerError(
+            f"{where} not found (looked for {str(path)!r}); install the package that ships it "
+            "or pass meshes=False to draw link segments instead."
+        ) from None
+    if not stat.S_ISREG(mode):
+        return _skip(f"{where} ({str(real)!r}) is not a regular file")
+    return real
 
 
-def urdf_visuals(urdf: str | os.PathLike) -> list[Visual]:
+def urdf_visuals(
+    urdf: str | os.PathLike, packages: Mapping[str, str | os.PathLike] | None = None
+) -> list[Visual]:
     """The ``<visual>`` elements of a URDF file's links, mesh paths resolved (module doc).
+
+    ``packages``: ``{package name: its directory}`` for ``package://`` paths found elsewhere
+    than beside the file. Mesh paths outside the package roots are left out, each with a
+    :class:`MeshPathWarning` (module doc, "Where meshes are read from").
 
     >>> import jaxkin.viewer as jview, jaxkin.robots.example_robot_data as erd
     >>> vs = jview.urdf_visuals(erd.path("erd/panda"))  # doctest: +SKIP
@@ -197,11 +306,11 @@ def urdf_visuals(urdf: str | os.PathLike) -> list[Visual]:
         }
     except ValueError as e:
         raise ViewerError(f"{path}: a <material> color is not 4 numbers ({e}).") from e
-    roots = _package_roots(path)
+    places = _Places(path, packages)
     out: list[Visual] = []
     for link in root.findall("link"):
         try:
-            out += _link_visuals(link, path, roots, colors)
+            out += _link_visuals(link, places, colors)
         except ValueError as e:
             if isinstance(e, JaxkinError):
                 raise
@@ -212,7 +321,7 @@ def urdf_visuals(urdf: str | os.PathLike) -> list[Visual]:
     return out
 
 
-def _link_visuals(link: Any, path: Path, roots: list[Path], colors: dict) -> list[Visual]:
+def _link_visuals(link: Any, places: _Places, colors: dict) -> list[Visual]:
     out = []
     for vis in link.findall("visual"):
         geom = vis.find("geometry")
@@ -230,7 +339,9 @@ def _link_visuals(link: Any, path: Path, roots: list[Path], colors: dict) -> lis
         shape = geom[0]
         common = dict(link=link.get("name"), xyz=xyz, rpy=rpy, rgba=rgba)
         if shape.tag == "mesh":
-            p = _resolve(shape.get("filename", ""), path, roots)
+            p = _resolve(shape.get("filename", ""), places)
+            if p is None:
+                continue  # refused, with a warning
             scale = _floats(shape.get("scale"), (1.0, 1.0, 1.0))
             out.append(Visual(kind="mesh", path=p, scale=scale, **common))
         elif shape.tag == "box":
@@ -246,9 +357,12 @@ def _link_visuals(link: Any, path: Path, roots: list[Path], colors: dict) -> lis
 _MJCF_VISIBLE_GROUPS = 3  # groups 0, 1, 2: those MuJoCo's own viewer shows by default
 
 
-def _mjcf_geoms(path: Path, trimesh: Any) -> list[tuple[str, Any, np.ndarray, np.ndarray]]:
+def _mjcf_geoms(
+    path: Path, trimesh: Any, max_bodies: int
+) -> list[tuple[str, Any, np.ndarray, np.ndarray]]:
     """``(body name, trimesh, geom_pos, geom_quat)`` of each visual geom of an MJCF file,
-    compiled by MuJoCo with its mesh files (module doc: which geoms are drawn)."""
+    compiled by MuJoCo with its mesh files (module doc: which geoms are drawn), after
+    :func:`jaxkin.mjcf.check_files` (includes that are not regular files, size, bodies)."""
     try:
         import mujoco
     except ImportError as e:
@@ -260,8 +374,10 @@ def _mjcf_geoms(path: Path, trimesh: Any) -> list[tuple[str, Any, np.ndarray, np
         raise ViewerError(
             f"MJCF file {str(path)!r} not found; pass mjcf= the path the robot was loaded from."
         )
+    check_files(path, max_bodies=max_bodies)
     try:
         spec = mujoco.MjSpec.from_file(str(path))
+        _check_asset_files(spec, path)
         spec.compiler.fusestatic = False  # the bodies of jk.load_mjcf, in the same order
         m = spec.compile()
     except ValueError as e:
@@ -308,6 +424,28 @@ def _mjcf_geoms(path: Path, trimesh: Any) -> list[tuple[str, Any, np.ndarray, np
         body = "world" if b == 0 else body
         out.append((body, mesh, np.array(m.geom_pos[g], float), np.array(m.geom_quat[g], float)))
     return out
+
+
+def _check_asset_files(spec: Any, path: Path) -> None:
+    """Refuse, before MuJoCo reads them, the mesh, height-field, skin and texture files of an
+    MJCF model that exist but are not regular files (a FIFO would block MuJoCo)."""
+    here = path.parent
+    names = [("mesh", here / spec.meshdir, a.file) for a in (*spec.meshes, *spec.hfields)]
+    names += [("skin", here / spec.meshdir, a.file) for a in spec.skins]
+    for t in spec.textures:
+        names += [("texture", here / spec.texturedir, f) for f in (t.file, *t.cubefiles)]
+    for kind, folder, name in names:
+        for c in dict.fromkeys((folder / name, here / name)) if name else ():
+            try:
+                mode = os.stat(c).st_mode
+            except (OSError, ValueError):
+                continue
+            if not stat.S_ISREG(mode):
+                raise ViewerError(
+                    f"{path}: {kind} file {name!r} ({str(c)!r}) is not a regular file (a FIFO, "
+                    "a device or a directory); MuJoCo would block reading it. Fix the file, or "
+                    "pass meshes=False to draw link segments instead."
+                )
 
 
 def _mjcf_path(robot: Robot, mjcf: Any) -> Path | None:
@@ -358,6 +496,41 @@ def _trimesh(visual: Visual, trimesh: Any) -> Any:
     return mesh
 
 
+_FOV = math.radians(75.0)  # viser's (three.js's) default vertical field of view
+_VIEW_FROM = (1.0, 0.75, 0.6)  # in front (+x), to the right (+y), above (+z)
+_MARGIN = 1.1
+_MIN_RADIUS = 0.05
+
+
+def camera_framing(points: Any, fov: float = _FOV) -> tuple[np.ndarray, np.ndarray]:
+    """``(position, look_at)`` of a camera that frames ``points`` (n, 3), z up.
+
+    ``look_at`` is the centre ``c`` of the bounding box of the (finite) points; ``position`` is
+    ``c + d u``, ``u`` the unit vector along ``(1, 0.75, 0.6)`` (in front, to the right, above)
+    and ``d = 1.1 r / sin(fov / 2)``: the distance at which the sphere around the box (``r``:
+    half its diagonal, at least 5 cm) fills the vertical field of view ``fov`` (radians;
+    default 75 degrees, viser's) with a 10 % margin. The distance is proportional to the
+    robot's extent.
+
+    >>> import jaxkin.viewer as jview
+    >>> position, look_at = jview.camera_framing([[0, 0, 0], [2, 2, 2], [1, 0, 1]])
+    >>> look_at.tolist()
+    [1.0, 1.0, 1.0]
+    >>> round(float(((position - look_at) ** 2).sum() ** 0.5), 4)  # 1.1 sqrt(3) / sin(37.5 deg)
+    3.1297
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) == 0:
+        p = np.zeros((1, 3))
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, _MIN_RADIUS)
+    u = np.array(_VIEW_FROM) / np.linalg.norm(_VIEW_FROM)
+    distance = _MARGIN * radius / math.sin(float(fov) / 2)
+    return centre + distance * u, centre
+
+
 def _node(frame: str) -> str:
     return "/robot/" + frame.replace("/", "_")
 
@@ -366,10 +539,14 @@ class View:
     """A running viewer (made by :func:`show`): ``url``, ``update``, ``animate``, ``close``.
 
     ``server`` is the ``viser.ViserServer``; ``nodes`` maps each frame name to its scene node
-    name; ``mesh_nodes`` lists the mesh nodes.
+    name; ``mesh_nodes`` lists the mesh nodes; ``camera`` is the ``(position, look_at)`` the
+    page opens with (:func:`camera_framing` of the robot at the first ``q``; also viser's
+    "Reset View").
     """
 
-    def __init__(self, robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf):
+    def __init__(
+        self, robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf, packages=None
+    ):
         viser, trimesh = _viser()
         self.robot = robot
         self.server = server
@@ -385,33 +562,20 @@ class View:
             for n in robot.frame_names
         ]
         self.mesh_nodes: list[str] = []
+        self.camera: tuple[np.ndarray, np.ndarray] | None = None
+        self._corners: list[tuple[int, np.ndarray]] = []  # (frame, mesh box corners in it)
         path = _urdf_path(robot, urdf) if meshes else None
         if path is not None:
-            counts: dict[str, int] = {}
-            for vis in urdf_visuals(path):
-                if vis.link not in self.nodes:
-                    continue  # a link of the file that this robot's chain left out
-                k = counts.get(vis.link, 0)
-                counts[vis.link] = k + 1
-                name = f"{self.nodes[vis.link]}/visual_{k}"
-                scene.add_mesh_trimesh(
-                    name,
-                    _trimesh(vis, trimesh),
-                    position=np.array(vis.xyz, float),
-                    wxyz=self._so3.from_rpy_radians(*vis.rpy).wxyz,
-                )
-                self.mesh_nodes.append(name)
+            for vis in urdf_visuals(path, packages):
+                if vis.link in self.nodes:  # else a link of the file the chain left out
+                    wxyz = self._so3.from_rpy_radians(*vis.rpy).wxyz
+                    self._add_mesh(vis.link, _trimesh(vis, trimesh), np.array(vis.xyz), wxyz)
         path = _mjcf_path(robot, mjcf) if meshes and urdf is None else None
         if path is not None:
-            counts = {}
-            for body, mesh, pos, quat in _mjcf_geoms(path, trimesh):
-                if body not in self.nodes:
-                    continue  # a body of the file that this robot's part left out
-                k = counts.get(body, 0)
-                counts[body] = k + 1
-                name = f"{self.nodes[body]}/visual_{k}"
-                scene.add_mesh_trimesh(name, mesh, position=pos, wxyz=quat)
-                self.mesh_nodes.append(name)
+            n_bodies = max(MAX_BODIES, robot.n_frames)
+            for body, mesh, pos, quat in _mjcf_geoms(path, trimesh, n_bodies):
+                if body in self.nodes:  # else a body of the file that this robot's part left out
+                    self._add_mesh(body, mesh, pos, quat)
         if not self.mesh_nodes:
             self._segments = [(p, j + 1) for j, p in enumerate(robot.parents)]
             if robot.has_tool:
@@ -423,6 +587,25 @@ class View:
                 "/robot/ellipsoid", 1.0, _ELLIPSOID_COLOR, subdivisions=3, opacity=0.35
             )
         self._kernel = jax.jit(self._state)
+
+    def _add_mesh(self, frame: str, mesh: Any, position: np.ndarray, wxyz: Any) -> None:
+        """Draw ``mesh`` at ``position``/``wxyz`` in ``frame`` as its next ``visual_<k>``."""
+        k = sum(n.startswith(self.nodes[frame] + "/visual_") for n in self.mesh_nodes)
+        name = f"{self.nodes[frame]}/visual_{k}"
+        self.server.scene.add_mesh_trimesh(name, mesh, position=position, wxyz=wxyz)
+        self.mesh_nodes.append(name)
+        lo, hi = np.asarray(mesh.bounds, float)
+        box = np.array([[(lo, hi)[b >> i & 1][i] for i in range(3)] for b in range(8)])
+        R = self._so3(np.asarray(wxyz, float)).as_matrix()
+        self._corners.append((self.robot.frame_index(frame), box @ R.T + position))
+
+    def _frame_camera(self, Ts: np.ndarray) -> None:
+        """Open the page framing the robot at poses ``Ts`` (frame origins and mesh boxes)."""
+        points = [Ts[:, :3, 3]]
+        points += [c @ Ts[i, :3, :3].T + Ts[i, :3, 3] for i, c in self._corners]
+        camera = self.server.initial_camera
+        self.camera = camera_framing(np.concatenate(points), fov=camera.fov)
+        camera.position, camera.look_at = self.camera
 
     @property
     def url(self) -> str:
@@ -452,6 +635,8 @@ class View:
         )
         Ts, V, radii, axes = jax.device_get(self._kernel(q, qd))
         Ts = np.asarray(Ts, float)
+        if self.camera is None:
+            self._frame_camera(Ts)
         wxyz = self._so3.from_matrix(Ts[:, :3, :3]).wxyz
         scene = self.server.scene
         with self.server.atomic():
@@ -541,6 +726,7 @@ def show(
     urdf: str | os.PathLike | None = None,
     mjcf: str | os.PathLike | None = None,
     meshes: bool = True,
+    packages: Mapping[str, str | os.PathLike] | None = None,
     arrow_scale: float = 0.2,
     ellipsoid_scale: float = 0.3,
 ) -> View:
@@ -551,7 +737,9 @@ def show(
     frame). ``urdf``: the file the robot was loaded from, for its meshes (found by itself for
     ``jk.robots.load("erd/...")``); ``mjcf``: the same for a robot of :func:`jaxkin.load_mjcf`
     (found by itself for ``jk.robots.load("mjcf/...")``); ``meshes=False`` draws link segments
-    instead. Returns a
+    instead. ``packages``: ``{package name: directory}`` for the URDF's ``package://`` paths
+    found elsewhere than beside it (module doc, "Where meshes are read from"). The page opens
+    framing the robot (:func:`camera_framing`). Returns a
     :class:`View`; see the module doc for what is drawn and the example.
     """
     viser, _ = _viser()
@@ -563,7 +751,9 @@ def show(
         port = _free_port(host)
     server = viser.ViserServer(host=host, port=int(port), verbose=False)
     try:
-        view = View(robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf)
+        view = View(
+            robot, server, frame, arrow_scale, ellipsoid_scale, meshes, urdf, mjcf, packages
+        )
         view.update(q, qd)
     except BaseException:
         server.stop()

@@ -1,7 +1,7 @@
 """jaxkin.viewer: the scene holds one node per frame at its fk_all pose, the URDF's meshes, an
 MJCF file's geoms at MuJoCo's poses, the twist arrows and the velocity ellipsoid; the page is
 served and headless Chromium connects to it and mounts the 3-D view (its camera reaches the
-server)."""
+server), and the camera it opens with frames the robot (jview.camera_framing)."""
 
 import os
 import shutil
@@ -89,12 +89,21 @@ def test_panda_meshes_frames_twist_ellipsoid_in_headless_chromium(tmp_path):
 
         # A headless browser loads the page, opens the websocket and mounts the 3-D canvas:
         # the client's first camera message reaches the server.
-        mounted = threading.Event()
+        mounted, framed = threading.Event(), threading.Event()
         connected = []
+
+        def on_update(camera):
+            mounted.set()
+            # The browser reports its default camera, then the one the server set.
+            position, look_at = np.array(camera.position), np.array(camera.look_at)
+            if np.allclose(position, view.camera[0], atol=1e-3) and np.allclose(
+                look_at, view.camera[1], atol=1e-3
+            ):
+                framed.set()
 
         def on_connect(client):
             connected.append(client.client_id)  # the browser may leave before we look
-            client.camera.on_update(lambda _: mounted.set())
+            client.camera.on_update(on_update)
 
         view.server.on_client_connect(on_connect)
         cmd = [
@@ -105,7 +114,6 @@ def test_panda_meshes_frames_twist_ellipsoid_in_headless_chromium(tmp_path):
             "--no-first-run",
             f"--user-data-dir={tmp_path / 'profile'}",
             "--window-size=480,360",
-            "--virtual-time-budget=30000",
             view.url,
         ]
         proc = subprocess.Popen(
@@ -114,6 +122,8 @@ def test_panda_meshes_frames_twist_ellipsoid_in_headless_chromium(tmp_path):
         try:
             assert mounted.wait(60), "headless chromium did not mount the viewer within 60 s"
             assert len(connected) >= 1
+            # The browser's camera moves to the one that frames the robot (camera_framing).
+            assert framed.wait(60), "the browser's camera did not take the framing camera"
         finally:
             os.killpg(proc.pid, signal.SIGTERM)
             proc.wait(20)
@@ -131,10 +141,42 @@ def test_dh_robot_without_meshes_draws_link_segments():
         assert scene.get_handle_by_name("/robot/links") is not None
         assert scene.get_handle_by_name("/robot/twist_v") is None  # no qd, no twist
         _check_poses(view, robot, q)
+        # The page opens framing the robot at q: its frame origins (no meshes).
+        position, look_at = jview.camera_framing(np.asarray(jk.fk_all(robot, q))[:, :3, 3])
+        scene_camera = view.server.initial_camera
+        np.testing.assert_allclose(scene_camera.position, position, atol=1e-9)
+        np.testing.assert_allclose(scene_camera.look_at, look_at, atol=1e-9)
+        np.testing.assert_allclose(view.camera[0], position, atol=1e-9)
+        view.update(-q)  # later configurations leave the initial camera where it is
+        np.testing.assert_allclose(scene_camera.position, position, atol=1e-9)
         with pytest.raises(jview.ViewerError, match=r"shape \(T, 6\)"):
             view.animate(q)
         with pytest.raises(jk.JaxkinError):
             view.update(q[:3])
+
+
+def test_camera_framing_looks_at_the_centre_from_a_distance_proportional_to_the_extent():
+    """A cube of side ``s`` centred at ``c``: the camera looks at ``c`` from the direction
+    (1, 0.75, 0.6), at 1.1 r / sin(fov / 2) with r = s sqrt(3) / 2 (the box's sphere fills the
+    vertical field of view with a 10 % margin): the distance scales with the robot."""
+    c = np.array([0.4, -1.0, 0.7])
+    unit = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) / 2.0
+    u = np.array([1.0, 0.75, 0.6]) / np.linalg.norm([1.0, 0.75, 0.6])
+    for side in (0.3, 1.0, 4.0):
+        for fov in (np.radians(75.0), np.radians(50.0)):
+            position, look_at = jview.camera_framing(c + side * unit, fov=fov)
+            np.testing.assert_allclose(look_at, c, atol=1e-12)
+            r = side * np.sqrt(3) / 2
+            np.testing.assert_allclose(position, c + 1.1 * r / np.sin(fov / 2) * u, atol=1e-12)
+    # The whole box is in view: its sphere subtends less than the field of view.
+    position, look_at = jview.camera_framing(c + unit)
+    d = np.linalg.norm(position - look_at)
+    assert 2 * np.degrees(np.arcsin((np.sqrt(3) / 2) / d)) < 75.0
+    # One point (a robot without links) and non-finite rows: a 5 cm sphere around what is finite.
+    position, look_at = jview.camera_framing([[1.0, 2.0, 3.0], [np.nan, 0.0, 0.0]])
+    np.testing.assert_allclose(look_at, [1.0, 2.0, 3.0])
+    d = np.linalg.norm(position - look_at)
+    np.testing.assert_allclose(d, 1.1 * 0.05 / np.sin(np.radians(37.5)))
 
 
 def test_without_the_extra_the_error_names_the_install_command(monkeypatch):
