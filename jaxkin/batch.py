@@ -25,16 +25,19 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import csv
 import dataclasses
 import errno
 import io
 import math
 import os
+import re
 import shutil
 import signal
 import sys
 import threading
 import time
+import unicodedata
 import zipfile
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -46,7 +49,15 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .errors import JaxkinError, ShapeError
 
-__all__ = ["MapStats", "ProgressBar", "ResultWriter", "chunked_map", "stream_map"]
+__all__ = [
+    "MapStats",
+    "ProgressBar",
+    "ResultWriter",
+    "chunked_map",
+    "csv_record",
+    "csv_records",
+    "stream_map",
+]
 
 DEFAULT_CHUNK_SIZE = 65536
 
@@ -354,9 +365,19 @@ def stream_map(
 
     ``fn`` is compiled for the first batch's number of inputs, dtypes and shapes after the row
     axis; a later batch that differs raises :class:`~jaxkin.ShapeError` naming both.
+    ``chunk_size`` and ``devices`` are checked when called, before the first batch is read: a
+    ``chunk_size`` that is not a positive integer raises :class:`~jaxkin.JaxkinError`.
     """
     mesh = _mesh(devices)
-    chunk, _ = _chunking(chunk_size, max(int(chunk_size), 1), mesh.size)
+    size = _chunk_size(chunk_size, "stream_map")
+    chunk, _ = _chunking(size, size, mesh.size)
+    return _stream(fn, batches, chunk, mesh)
+
+
+def _stream(
+    fn: Callable[..., Any], batches: Iterable[Any], chunk: int, mesh: Mesh
+) -> Iterator[Any]:
+    """The generator behind :func:`stream_map`, for checked ``chunk`` and ``mesh``."""
     compiled, signature = None, None
     queue: collections.deque[list[Any]] = collections.deque()
     buffered = 0
@@ -462,20 +483,26 @@ def _check_inputs(arrays: tuple[Any, ...]) -> tuple[list[Any], int]:
 def _chunking(chunk_size: Any, n: int, n_devices: int = 1) -> tuple[int, int]:
     """(rows per chunk, number of chunks): the fewest chunks of at most ``chunk_size`` rows, all
     of one size, so that padding is minimal; rounded up to a multiple of ``n_devices``."""
+    n_chunks = -(-n // _chunk_size(chunk_size, "chunked_map"))
+    chunk = -(-n // n_chunks) if n_chunks else 1
+    chunk = -(-chunk // n_devices) * n_devices
+    return chunk, n_chunks
+
+
+def _chunk_size(chunk_size: Any, who: str) -> int:
+    """``chunk_size`` as an int; a :class:`JaxkinError` (naming ``who``) unless it is a positive
+    integer (a bool is not)."""
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
         raise JaxkinError(
-            f"chunked_map: chunk_size must be a positive integer, got {chunk_size!r} "
+            f"{who}: chunk_size must be a positive integer, got {chunk_size!r} "
             f"({type(chunk_size).__name__}). The default is {DEFAULT_CHUNK_SIZE}."
         )
     if chunk_size < 1:
         raise JaxkinError(
-            f"chunked_map: chunk_size must be >= 1, got {chunk_size}. "
+            f"{who}: chunk_size must be >= 1, got {chunk_size}. "
             f"The default is {DEFAULT_CHUNK_SIZE}."
         )
-    n_chunks = -(-n // int(chunk_size))
-    chunk = -(-n // n_chunks) if n_chunks else 1
-    chunk = -(-chunk // n_devices) * n_devices
-    return chunk, n_chunks
+    return int(chunk_size)
 
 
 def _mesh(devices: Any) -> Mesh:
@@ -601,8 +628,11 @@ class ResultWriter:
       disk holds the file once;
     * ``"csv"`` (``*.csv``, or ``path="-"`` for standard output): one line per row; ``columns``
       maps the fields to write to their column names (default: every field, ``name`` or
-      ``name_1 ... name_k``); ``comments`` become ``#`` lines above the header (default:
-      ``meta``);
+      ``name_1 ... name_k``), quoted by the ``csv`` module where they hold ``,``, ``"`` or
+      line breaks; ``comments`` become ``#`` lines above the header (default: ``meta``), each
+      kept on its line: a backslash is doubled and line breaks and other control characters
+      are written as Python's escapes (``\\n``, ``\\x1b``, ``\\u2028``).
+      :func:`csv_records` reads names and comments back exactly;
     * ``"dir"`` (any other path): a new directory of ``name.npy`` files
       (``np.load(..., mmap_mode="r")`` reads them without loading).
 
@@ -610,10 +640,18 @@ class ResultWriter:
     (a file, or a directory for ``"dir"``), then flushed, ``fsync``-ed, given ordinary
     permissions (``0o666``/``0o777`` less the umask) and renamed onto ``path``. Use it as a
     context manager: leaving the block without :meth:`commit` (an exception, Ctrl-C, SIGTERM)
-    removes the temporary. Inside the block SIGTERM raises ``SystemExit(143)`` (or runs the
-    handler installed before) so that this cleanup runs, and SIGXFSZ is ignored so that a file
-    size limit is an ``OSError``; both handlers are restored on exit (main thread only). Only
-    SIGKILL or a crash can leave the temporary behind.
+    removes the temporary. Inside the block SIGINT and SIGTERM run the handler installed
+    before (Python's SIGINT handler raises ``KeyboardInterrupt``) or, where that was the
+    default action, raise ``SystemExit(128 + signal)`` (143 for SIGTERM), so that this cleanup
+    runs; an exception so raised where Python swallows it (inside a garbage-collector callback)
+    is raised again by the next :meth:`append` or :meth:`commit`, so an interrupted run stops
+    within a chunk and never commits. SIGXFSZ is ignored so that a file size limit is an
+    ``OSError``. The handlers are restored on exit (main thread only; an ignored signal stays
+    ignored). Only SIGKILL or a crash can leave the temporary behind.
+
+    The temporary is created on entering the block, before any work: a directory that cannot
+    be written (permissions, a read-only file system) raises :class:`~jaxkin.JaxkinError`
+    naming it there (and at construction where ``os.access`` already says so).
 
     Example::
 
@@ -642,7 +680,7 @@ class ResultWriter:
         _check_names([*self.fields, *self.meta], self.format)
         self.n, self.rows, self.tmp = int(n), 0, None
         self._saved: list[tuple[int, Any]] = []
-        self._signal = 0
+        self._pending: BaseException | None = None
         if self.format == "csv":
             columns = columns or {k: _default_columns(k, s) for k, (s, _) in self.fields.items()}
             if comments is None:
@@ -661,9 +699,12 @@ class ResultWriter:
         parent = os.path.dirname(self.path)
         if not os.path.isdir(parent):
             raise JaxkinError(
-                f"cannot write {self.path}: directory {parent} does not exist; create it or "
-                "choose another path."
+                f"cannot write {self.path}: directory {parent} "
+                + ("is not a directory" if os.path.lexists(parent) else "does not exist")
+                + "; create it or choose another path."
             )
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise _unwritable(self.path, "permission denied")
         if self.format == "dir" and os.path.lexists(self.path):
             raise JaxkinError(f"out {self.path!r} already exists; choose a new path.")
         if os.path.isdir(self.path):
@@ -671,8 +712,8 @@ class ResultWriter:
         need, free = self._file.size_estimate(), shutil.disk_usage(parent).free
         if need > free:
             raise JaxkinError(
-                f"cannot write {self.path}: it needs about {need / 1e9:,.1f} GB and {parent} has "
-                f"{free / 1e9:,.1f} GB free; write fewer rows or elsewhere."
+                f"cannot write {self.path}: it needs about {_size_text(need)} and {parent} has "
+                f"{_size_text(free)} free; write fewer rows or elsewhere."
             )
 
     def _open(self) -> None:
@@ -699,7 +740,12 @@ class ResultWriter:
                 self._file.open(os.fdopen(fd, "w+b"))
         except OSError as e:
             self.abort()
+            if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+                raise _unwritable(self.path, e.strerror) from None
             raise OSError(e.errno, e.strerror, self.path) from None
+        except BaseException:  # e.g. Ctrl-C: __exit__ does not run when __enter__ raises
+            self.abort()
+            raise
 
     def append(self, rows: Mapping[str, Any]) -> None:
         """Append the next rows: ``rows[name]`` of shape ``(k, *row_shape)`` for every field,
@@ -772,33 +818,42 @@ class ResultWriter:
 
     def __enter__(self) -> ResultWriter:
         if threading.current_thread() is threading.main_thread():
-            self._saved = [(signal.SIGTERM, signal.getsignal(signal.SIGTERM))]
-            if self._saved[0][1] != signal.SIG_IGN:
-                signal.signal(signal.SIGTERM, self._terminated)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._saved.append((sig, signal.getsignal(sig)))
+                if self._saved[-1][1] != signal.SIG_IGN:
+                    signal.signal(sig, self._interrupted)
             if hasattr(signal, "SIGXFSZ"):
                 self._saved.append((signal.SIGXFSZ, signal.signal(signal.SIGXFSZ, signal.SIG_IGN)))
         # Only now, with the handlers in place: a SIGTERM can no longer find a temporary that
         # nothing would remove.
-        self._open_once()
+        try:
+            self._open_once()
+        except BaseException:  # __exit__ does not run when __enter__ raises: restore here
+            self.__exit__(*sys.exc_info())
+            raise
         return self
 
     def _open_once(self) -> None:
         if self.path != "-" and self.tmp is None and self._file is not None:
             self._open()
 
-    def _terminated(self, signum: int, frame: Any) -> None:
-        previous = self._saved[0][1]
-        if callable(previous):
+    def _interrupted(self, signum: int, frame: Any) -> None:
+        """SIGINT and SIGTERM: run the handler installed before (SIGINT's raises
+        KeyboardInterrupt), or raise ``SystemExit(128 + signum)`` where it was the default."""
+        previous = dict(self._saved)[signum]
+        try:
+            if not callable(previous):
+                raise SystemExit(128 + signum)
             previous(signum, frame)
-            return
-        # Python may run this inside a gc or __del__ callback, which swallows exceptions: the
-        # flag makes the next append or commit raise instead.
-        self._signal = signum
-        raise SystemExit(128 + signum)
+        except BaseException as e:
+            # Python may run this inside a gc or __del__ callback (JAX has some), which swallows
+            # exceptions: kept, the next append or commit raises it again.
+            self._pending = e
+            raise
 
     def _check_signal(self) -> None:
-        if self._signal:
-            raise SystemExit(128 + self._signal)
+        if self._pending is not None:
+            raise self._pending
 
     def __exit__(self, *exc: Any) -> None:
         try:
@@ -807,6 +862,26 @@ class ResultWriter:
             for sig, handler in reversed(self._saved):
                 signal.signal(sig, signal.SIG_DFL if handler is None else handler)
             self._saved = []
+
+
+def _unwritable(path: str, why: str | None) -> JaxkinError:
+    parent = os.path.dirname(path)
+    return JaxkinError(
+        f"cannot write {path}: directory {parent} is not writable ({why}); choose a directory "
+        "you can write to, or make it writable."
+    )
+
+
+def _size_text(nbytes: float) -> str:
+    """``nbytes`` in the unit that fits: ``"512 bytes"``, ``"1.5 kB"``, ``"2.3 MB"``, ``"4.0 GB"``,
+    ``"1.2 TB"`` (decimal units: 1 kB = 1000 bytes, as ``df -H`` counts)."""
+    if nbytes < 1000:
+        return f"{int(nbytes)} bytes"
+    for unit in ("kB", "MB", "GB"):
+        nbytes /= 1000
+        if nbytes < 999.95:
+            return f"{nbytes:.1f} {unit}"
+    return f"{nbytes / 1000:,.1f} TB"
 
 
 def _result_format(path: str, format: str | None) -> str:
@@ -932,7 +1007,119 @@ class _NpzFile:
         _sync_close(self.f)
 
     def discard(self) -> None:
-        self.f.close()
+        if hasattr(self, "f"):  # not opened when the temporary could not be created
+            self.f.close()
+
+
+def csv_records(
+    lines: Iterable[str], *, source: Any = "csv", comments: list[str] | None = None
+) -> Iterator[tuple[int, list[str]]]:
+    """The records of CSV text such as a :class:`ResultWriter` writes: ``(line, fields)``.
+
+    ``lines``: a text file opened with ``newline=""`` (so that quoted fields keep their line
+    breaks) or any iterable of lines with their ends. Records are parsed by the ``csv`` module
+    (quoted fields may hold ``,``, ``"`` and line breaks) and ``fields`` are returned as
+    written, not stripped; ``line`` is the number of the record's first line. Comments and
+    blank lines are recognised only where a record starts, never inside a quoted field: a
+    blank line is skipped; a line whose first non-blank character is ``#`` is a comment, and
+    when ``comments`` is a list its text (after ``#`` and one space, escapes such as ``\\n``
+    undone: see :class:`ResultWriter`) is appended to it.
+
+    Raises:
+      JaxkinError: malformed CSV (``strict`` parsing: a quoted field never closed, or text
+        after a closing quote), naming ``source`` and the line.
+
+    >>> list(csv_records(['# a note\\n', 'x,"y, z"\\n', '\\n', '1,2\\n']))
+    [(2, ['x', 'y, z']), (4, ['1', '2'])]
+    """
+    at = {"start": True, "line": 0, "first": 0}
+
+    def record_lines() -> Iterator[str]:
+        for number, line in enumerate(lines, start=1):
+            at["line"] = number
+            if at["start"]:
+                head = line.lstrip()
+                if not head:
+                    continue
+                if head.startswith("#"):
+                    if comments is not None:
+                        comments.append(_comment_text(head))
+                    continue
+                at["start"], at["first"] = False, number
+            yield line
+
+    reader = csv.reader(record_lines(), strict=True)
+    while True:
+        try:
+            fields = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as e:
+            raise JaxkinError(f"{source} line {at['line']}: {e}; check its quotes.") from None
+        at["start"] = True
+        yield at["first"], fields
+
+
+def csv_record(fields: Sequence[str]) -> str:
+    """``fields`` as one CSV record ending in ``\\n``, which :func:`csv_records` reads back as
+    they are (a :class:`ResultWriter`'s header is one).
+
+    Quoted by the ``csv`` module where a field holds ``,``, ``"``, ``\\r`` or ``\\n``; every
+    field is quoted where the record would otherwise read as a comment (``#`` first), a blank
+    line or a byte order mark.
+
+    >>> csv_record(["x", "y, z", "#"])
+    'x,"y, z",#\\n'
+    >>> csv_record(["#a", "b"])
+    '"#a","b"\\n'
+    """
+    buf = io.StringIO()
+    # "\r\n": the csv module quotes fields holding its line terminator's characters (not others)
+    csv.writer(buf, lineterminator="\r\n").writerow(fields)
+    text = buf.getvalue()
+    if not text.strip() or text.lstrip().startswith("#") or text.startswith("\ufeff"):
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\r\n", quoting=csv.QUOTE_ALL).writerow(fields)
+        text = buf.getvalue()
+    return text[: -len("\r\n")] + "\n"
+
+
+_ESCAPES = {"\\": "\\", "\n": "n", "\r": "r", "\t": "t"}
+_UNESCAPES = {v: k for k, v in _ESCAPES.items()}
+_ESCAPED = re.compile(r"\\(?:[\\nrt]|x[0-9a-fA-F]{2}|u[0-9a-fA-F]{4}|U[0-9a-fA-F]{8})")
+
+
+def _escape_comment(text: str) -> str:
+    """``text`` on one line, reversibly: a backslash is doubled; line breaks and other control
+    or format characters (Unicode categories Cc, Cf, Zl, Zp, Cs) become Python's escapes
+    ``\\n``, ``\\r``, ``\\t``, ``\\xNN``, ``\\uNNNN``, ``\\UNNNNNNNN``
+    (:func:`_comment_text` undoes them)."""
+    out = []
+    for c in text:
+        if c in _ESCAPES:
+            out.append("\\" + _ESCAPES[c])
+        elif unicodedata.category(c) in ("Cc", "Cf", "Zl", "Zp", "Cs"):
+            k = ord(c)
+            width = 2 if k < 0x100 else 4 if k < 0x10000 else 8
+            out.append(f"\\{'xuU'[width // 4]}{k:0{width}x}")
+        else:
+            out.append(c)
+    return "".join(out)
+
+
+def _comment_text(line: str) -> str:
+    """The text of a ``#`` comment line as :func:`_escape_comment` wrote it."""
+    text = line[1:].rstrip("\r\n")
+    text = text[1:] if text.startswith(" ") else text
+
+    def unescape(m: re.Match[str]) -> str:
+        code = m.group()[1:]
+        if code in _UNESCAPES:
+            return _UNESCAPES[code]
+        k = int(code[1:], 16)
+        return chr(k) if k <= sys.maxunicode else m.group()
+
+    return _ESCAPED.sub(unescape, text)
 
 
 def _sync_close(f: Any) -> None:
@@ -978,7 +1165,9 @@ class _DirFile:
 
 class _CsvFile:
     """One text line per row: the ``columns`` fields side by side, ``%.17g`` (float64) or
-    ``%.9g`` (float32), so values round-trip; ``comments`` as ``#`` lines on top."""
+    ``%.9g`` (float32), so values round-trip; ``comments`` as ``#`` lines on top, each escaped
+    onto its line (:func:`_escape_comment`); the header quoted by the ``csv`` module
+    (:func:`csv_record`). :func:`csv_records` reads all of it back as written."""
 
     def __init__(
         self, fields: dict, n: int, columns: Mapping[str, Sequence[str]], comments
@@ -992,7 +1181,16 @@ class _CsvFile:
                     f"csv: field {name!r} has {math.prod(fields[name][0])} values per row, "
                     f"but {len(names)} column names."
                 )
-        self.columns, self.comments = dict(columns), list(comments)
+        self.columns, self.comments = dict(columns), [str(c) for c in comments]
+        self.names = [str(c) for cols in self.columns.values() for c in cols]
+        for c in self.names:
+            try:
+                c.encode("utf-8")
+            except UnicodeEncodeError:
+                raise JaxkinError(
+                    f"csv: column name {c!r} holds a lone surrogate, which UTF-8 cannot "
+                    "carry; rename the column."
+                ) from None
         wide = any(fields[k][1] == np.float64 for k in self.columns)
         self.digits, self.n_values = (17 if wide else 9), sum(map(len, self.columns.values()))
         self.n = n
@@ -1002,15 +1200,16 @@ class _CsvFile:
 
     def open(self, f: Any) -> None:
         self.f = f
-        names = [c for cols in self.columns.values() for c in cols]
-        lines = [f"# {c}" for c in self.comments] + [",".join(names)]
-        self._write("\n".join(lines) + "\n")
+        lines = [f"# {_escape_comment(c)}\n" for c in self.comments]
+        self._write("".join(lines) + csv_record(self.names))
 
     def _write(self, text: str) -> None:
         self.f.write(text if isinstance(self.f, io.TextIOBase) else text.encode())
 
     def append(self, arrays: dict[str, np.ndarray]) -> None:
         k = next(iter(arrays.values())).shape[0]
+        if k == 0:  # reshape(0, -1) is ambiguous
+            return
         table = np.concatenate([arrays[c].reshape(k, -1) for c in self.columns], axis=1)
         buf = io.StringIO()
         np.savetxt(buf, table, fmt=f"%.{self.digits}g", delimiter=",")
@@ -1023,5 +1222,5 @@ class _CsvFile:
             _sync_close(self.f)
 
     def discard(self) -> None:
-        if not isinstance(self.f, io.TextIOBase):
+        if hasattr(self, "f") and not isinstance(self.f, io.TextIOBase):
             self.f.close()

@@ -259,3 +259,18 @@ def test_row_sources_are_read_chunk_by_chunk():
     source = RowSource(x)
     assert_tree_equal(chunked_map(row_fn, source, y, chunk_size=4), reference(x, y), rtol=1e-14)
     assert source.reads == [(0, 4), (4, 8), (8, 12), (12, 13)]
+
+
+@pytest.mark.parametrize("bad", [0, -4, 2.5, True, "abc", None])
+def test_stream_map_bad_chunk_size_is_refused_when_called(bad):
+    """The check chunked_map makes, named for stream_map, before any batch is read (a generator
+    would only check on the first next())."""
+    read = []
+
+    def batches():
+        read.append(1)
+        yield np.ones((2, 3))
+
+    with pytest.raises(jk.JaxkinError, match=r"stream_map: chunk_size must be .*default is"):
+        stream_map(lambda r: r * 2, batches(), chunk_size=bad)
+    assert read == []
