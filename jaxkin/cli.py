@@ -14,8 +14,16 @@
   ``CHECK_ROWS`` configurations are also checked against autodiff (``jax.jacfwd``). Prints a
   summary.
 
-ROBOT is a zoo name (``jaxkin robots``), an example-robot-data name (``erd/panda``) or the path of
-a URDF file.
+ROBOT is a zoo name (``jaxkin robots``), an example-robot-data name (``erd/panda``), an MJCF model
+name (``mjcf/...``) or the path of a URDF or MJCF file (an ``.xml`` file whose root element is
+``<mujoco>`` loads with :func:`jaxkin.load_mjcf`). A ``.xacro`` file is a program (its ``${...}``
+expressions run Python): it is expanded only with ``--trust-xacro``.
+
+Library errors advise Python keywords (``frame=``, ``tip=``, ``trust=True``); the command line
+reports them with its own flags instead (``--frame``, ``--tip``, ``--trust-xacro``).
+
+The command line turns float64 on (``--dtype float64``, the default, enables
+``jax_enable_x64`` for the command); the library follows JAX's float32 default.
 
 Exit codes: 0 success; 1 a check failed (the hand-built and autodiff Jacobians disagree, or a
 result is not finite); 2 a usage error (one line on stderr starting ``jaxkin: error:``); 130
@@ -26,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
 import io
 import json
 import math
@@ -35,8 +42,10 @@ import pathlib
 import re
 import sys
 import zipfile
+import zlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
+from xml.parsers import expat
 
 import jax
 import jax.numpy as jnp
@@ -79,7 +88,16 @@ MAX_N = 100_000_000
 MAX_CHUNK = 1 << 20
 MAX_DIGITS = 17  # float64 round-trips with 17 significant digits; more print noise
 MAX_SEED = 2**32 - 1
-URDF_SUFFIXES = (".urdf", ".xml")
+URDF_SUFFIXES = (".urdf", ".xml", ".xacro")
+XACRO_SUFFIX = ".xacro"
+# Names with these prefixes are robots of jk.robots (example-robot-data, MJCF packages) unless a
+# file of that name exists: a mistyped one gets the library's suggestions, not "no such file".
+NAME_PREFIXES = ("erd/", "mjcf/")
+# Configurations input (--configurations): the most bytes read from standard input, and the most
+# a used .npz member may declare (uncompressed, and as its .npy header's shape x itemsize).
+MAX_INPUT_BYTES = 1 << 30
+STDIN_BLOCK = 1 << 20  # bytes per read from standard input
+SNIFF_BYTES = 1 << 16  # bytes of a robot file read to find its root element (URDF or MJCF)
 OUTPUT_FORMATS = ("npz", "csv")
 
 
@@ -171,6 +189,7 @@ def _frame(text: str) -> int | str:
 
 
 # ---------------------------------------------------------------------- parser
+_GIB = MAX_INPUT_BYTES / 2**30
 _VELOCITIES_EPILOG = f"""\
 sampling:
   q is uniform within each joint's limits (jaxkin.sample_configurations); an unbounded side
@@ -198,6 +217,20 @@ check (the first {CHECK_ROWS:,} configurations; all run the same hand-built kern
 limits (larger values are refused in one line, exit 2):
   --n at most {MAX_N:,} per run (and the output must fit the free disk); --chunk-size at most
   {MAX_CHUNK:,}; --seed from 0 to {MAX_SEED:,}; jacobian --digits at most {MAX_DIGITS}.
+  --configurations: a CSV file or standard input at most {_GIB:g} GiB (MAX_INPUT_BYTES: standard
+  input is read up to it, never further); of an .npz only q and qd are read, each at most
+  {_GIB:g} GiB as declared (the zip member's size and its .npy header's shape x itemsize),
+  checked before it is decompressed.
+
+robot files:
+  a .urdf file, an MJCF .xml file (root element <mujoco>: jaxkin.load_mjcf; any other .xml is
+  read as URDF), or a .xacro file with --trust-xacro only: xacro files are programs, and their
+  ${{...}} expressions run Python that nothing sandboxes (without the flag they are refused;
+  or expand one yourself: xacro robot.urdf.xacro > robot.urdf).
+
+precision:
+  --dtype float64 (the default) turns jax_enable_x64 on for this run; the library follows JAX's
+  float32 default. The summary's dtype line says which was used.
 
 configurations file (--configurations PATH, instead of sampling):
   .npz: an array q of shape (N, dof) (or (dof,) for one configuration) and optionally qd of the
@@ -224,7 +257,10 @@ output and the summary to stderr):
 """
 
 
-_ROBOT_HELP = "zoo name, erd/<name> (example-robot-data) or a URDF file path; see 'jaxkin robots'"
+_ROBOT_HELP = (
+    "zoo name, erd/<name> (example-robot-data), mjcf/<name>, or a URDF file path (an MJCF .xml "
+    "file, a .xacro with --trust-xacro); see 'jaxkin robots'"
+)
 
 _JACOBIAN_EPILOG = """\
 rows and columns:
@@ -250,6 +286,14 @@ def _add_robot_options(p: argparse.ArgumentParser) -> None:
         help="URDF robots: keep only the chain from --base to this link (the default frame)",
     )
     p.add_argument("--base", metavar="LINK", help="URDF robots: the link taken as the world frame")
+    p.add_argument(
+        "--trust-xacro",
+        action="store_true",
+        help="expand a .xacro ROBOT file with the xacro package. A xacro file is a program (its "
+        "${...} expressions run Python, which no sandbox contains): pass this only for files you "
+        "trust; without it a .xacro file is refused (or expand it yourself: xacro robot.urdf.xacro "
+        "> robot.urdf)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -290,8 +334,8 @@ def _add_robots_parser(sub: Any) -> None:
         description=(
             "List the zoo (name and description), then the example-robot-data URDFs that load\n"
             "by name (erd/..., when example-robot-data is installed) and the MJCF models of\n"
-            "installed packages (mjcf/..., dm-control, gymnasium-robotics). Any URDF file also\n"
-            "works as ROBOT: give its path."
+            "installed packages (mjcf/..., dm-control, gymnasium-robotics). Any URDF or MJCF\n"
+            "file also works as ROBOT: give its path."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -340,7 +384,9 @@ def _add_jacobian_parser(sub: Any) -> None:
         help=f"decimals in text output, 0 to {MAX_DIGITS} (default: %(default)s)",
     )
     _add_robot_options(jac)
-    _add_dtype_option(jac, "float precision (default: %(default)s)")
+    _add_dtype_option(
+        jac, "float precision (default: %(default)s; float64 enables jax_enable_x64 for this run)"
+    )
 
 
 def _add_jacobian_kind_options(jac: argparse.ArgumentParser) -> None:
@@ -492,8 +538,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     try:
         return args.handler(args)
-    except (UsageError, jk.JaxkinError) as e:
+    except UsageError as e:
         return _usage_error(str(e))
+    except jk.JaxkinError as e:
+        return _usage_error(_cli_message(e))
     except KeyboardInterrupt:
         print("jaxkin: interrupted", file=sys.stderr)
         return 130
@@ -503,6 +551,51 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 141
     except OSError as e:  # writing the output: disk full, file too large, permission denied
         return _usage_error(f"{e.strerror or e}: {e.filename}" if e.filename else str(e))
+
+
+# The library's advice names Python keywords; on the command line they are flags. Applied in
+# order to the message of every jaxkin error the command line reports (NoDefaultFrameError has
+# its own wording, from its attributes).
+_PYTHON_TO_FLAGS = tuple(
+    (re.compile(pattern), flags)
+    for pattern, flags in (
+        (r"\bleave (tip|base|frame)=None\b", r"leave out --\1"),
+        (r"\b(tip|base|frame)=(?=[/)])", r"--\1"),  # "(tip=/base=)"
+        (r"\b(tip|base|frame)=", r"--\1 "),
+        (r"(?:load it with )?\bjk\.load_urdf\([^()]*\btrust=True\)", "pass --trust-xacro"),
+        (r"\btrust=True\b", "--trust-xacro"),
+        (r"\bjk\.robots\.(?:erd|mjcf)_names\(\)", "'jaxkin robots'"),
+        (r"\bwith jk\.load_(?:mjcf|urdf)\(path\)", "by giving its path as ROBOT"),
+    )
+)
+
+
+def _cli_message(error: Exception) -> str:
+    """The message of a jaxkin error as the command line reports it: its keyword advice
+    (``frame=``, ``tip=``, ``base=``, ``trust=True``) reworded as flags (``--frame`` ...)."""
+    if isinstance(error, jk.NoDefaultFrameError):
+        names = list(error.candidates)
+        shown = names if len(names) <= 30 else [*names[:30], "..."]
+        return (
+            f"robot {error.robot!r} has no default frame: its moving joints branch, so no frame "
+            f"is moved by all of them. Candidate end frames ({len(names)}): {shown}. Choose one "
+            f"with --frame (e.g. --frame {names[0]}), or keep only the chain to it with --tip "
+            "(URDF and MJCF robots)"
+        )
+    message = str(error)
+    for pattern, flags in _PYTHON_TO_FLAGS:
+        message = pattern.sub(flags, message)
+    return message
+
+
+def _frame_name(robot: jk.Robot, frame: int | str | None) -> str:
+    """The name of the frame ``--frame`` gives (None: the default frame)."""
+    try:
+        return robot.frame_names[robot.frame_index(frame)]
+    except jk.NoDefaultFrameError:
+        raise
+    except jk.JaxkinError as e:
+        raise UsageError(f"--frame {frame}: {e}") from None
 
 
 def _usage_error(message: str) -> int:
@@ -535,27 +628,42 @@ def cmd_robots(args: argparse.Namespace) -> int:
             print(name)
     else:
         print("# MJCF robots: install dm-control or gymnasium-robotics for more by name (mjcf/...)")
-    print("# any URDF file also works as ROBOT: give its path")
+    print("# any URDF file (or MJCF .xml file) also works as ROBOT: give its path")
     return 0
 
 
-def load_robot(spec: str, dtype: str, tip: str | None = None, base: str | None = None):
-    """The robot ``spec`` names: a URDF path, a zoo name or an ``erd/...`` name.
+def load_robot(
+    spec: str,
+    dtype: str,
+    tip: str | None = None,
+    base: str | None = None,
+    *,
+    trust_xacro: bool = False,
+):
+    """The robot ``spec`` names: a zoo name, an ``erd/...`` or ``mjcf/...`` name, or the path of
+    a URDF or MJCF file (:func:`jaxkin.load_mjcf` when its root element is ``<mujoco>``) or, with
+    ``trust_xacro``, of a ``.xacro`` file (expanded by the xacro package, which runs the file's
+    code: refused without consent).
 
-    Names win over files: a file called like a zoo robot needs a path (``./niryo_one``). Returns
-    ``(robot, label)``; ``label`` names output files. Every user mistake is a
-    :class:`UsageError` or a :class:`jaxkin.JaxkinError` (a bad file's message names it).
+    Names win over files: a file called like a zoo robot needs a path (``./niryo_one``); a spec
+    with a prefix of ``NAME_PREFIXES``, no file suffix and no file of that name is a robot name
+    (a mistyped one gets the library's suggestions). Returns ``(robot, label)``; ``label``
+    names output files. Every user mistake is a :class:`UsageError` or a
+    :class:`jaxkin.JaxkinError` (a bad file's message names it).
     """
     zoo = jk.robots.names()
     urdf = jk.robots.erd_names()
-    if spec not in zoo and spec not in urdf and spec not in jk.robots.mjcf_names():
+    named = spec in zoo or spec in urdf or spec in jk.robots.mjcf_names()
+    name_like = spec.startswith(NAME_PREFIXES) and not spec.lower().endswith(URDF_SUFFIXES)
+    if not named and not (name_like and not os.path.lexists(spec)):
         path = pathlib.Path(spec)
-        if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or path.exists():
-            return _movable(_load_urdf_file(path, dtype, tip, base), spec), path.stem
+        if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or os.path.lexists(spec):
+            robot = _load_file(path, dtype, tip, base, trust_xacro)
+            return _movable(robot, spec), pathlib.Path(path.name.removesuffix(XACRO_SUFFIX)).stem
         more = f" or one of {len(urdf)} erd/... URDF robots" if urdf else ""
         raise UsageError(
-            f"unknown robot {spec!r}; choose one of {', '.join(zoo)}{more}, or give a URDF file "
-            "path (see 'jaxkin robots')"
+            f"unknown robot {spec!r}; choose one of {', '.join(zoo)}{more}, or give a URDF or "
+            "MJCF file path (see 'jaxkin robots')"
         )
     options = {k: v for k, v in (("tip", tip), ("base", base)) if v is not None}
     if options and spec in zoo:
@@ -584,15 +692,56 @@ def _movable(robot, spec: str):
     return robot
 
 
-def _load_urdf_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None):
-    if not path.exists():
-        raise UsageError(f"no such URDF file: {path}")
-    if not path.is_file():
-        raise UsageError(f"{path} is not a file; give the path of a .urdf file")
+def _load_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None, trust: bool):
+    """A robot from a URDF, MJCF or (``trust`` given) xacro file."""
+    if not os.path.islink(path):  # a broken link or a loop: the loader says which
+        if not path.exists():
+            kind = "URDF or MJCF" if path.suffix.lower() == ".xml" else "URDF"
+            raise UsageError(f"no such {kind} file: {path}")
+        if not path.is_file():
+            raise UsageError(f"{path} is not a file; give the path of a .urdf or MJCF .xml file")
+    xacro = path.name.lower().endswith(XACRO_SUFFIX)
+    if xacro and not trust:
+        raise UsageError(
+            f"{path} is a xacro file, and xacro files are programs (their ${{...}} expressions "
+            "run Python, which nothing sandboxes): pass --trust-xacro only for files you trust, "
+            f"or expand it yourself (xacro {path} > robot.urdf) and pass the .urdf"
+        )
     try:
-        return jk.load_urdf(path, tip=tip, base=base, dtype=dtype)
+        if not xacro and _root_tag(path) == "mujoco":
+            return jk.load_mjcf(path, tip=tip, base=base, dtype=dtype)
+        return jk.load_urdf(path, tip=tip, base=base, dtype=dtype, trust=trust)
     except OSError as e:
         raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
+
+
+class _RootFound(Exception):
+    """Stops the parse of :func:`_root_tag` at the first element."""
+
+
+def _root_tag(path: pathlib.Path) -> str | None:
+    """The name of the first element of the XML file ``path``, from at most ``SNIFF_BYTES`` of
+    it; None when they hold none, a DTD comes first or it is not XML (the URDF loader then says
+    what is wrong). Only the start of a regular file is read; nothing is expanded."""
+    if not path.is_file():
+        return None
+    found: list[str] = []
+
+    def start(name: str, attributes: Any) -> None:
+        found.append(name)
+        raise _RootFound
+
+    def doctype(*args: Any) -> None:
+        raise _RootFound  # no DTD is processed here; the loaders refuse or handle it
+
+    parser = expat.ParserCreate()
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    parser.StartElementHandler, parser.StartDoctypeDeclHandler = start, doctype
+    with open(path, "rb") as f:
+        head = f.read(SNIFF_BYTES)
+    with contextlib.suppress(_RootFound, expat.ExpatError):
+        parser.Parse(head, False)
+    return found[0] if found else None
 
 
 # ---------------------------------------------------------------------- velocities
@@ -770,8 +919,10 @@ class _Summary:
 
 def cmd_velocities(args: argparse.Namespace) -> int:
     with _x64(args.dtype == "float64"):
-        robot, label = load_robot(args.robot, args.dtype, args.tip, args.base)
-        frame_name = robot.frame_names[robot.frame_index(args.frame)]
+        robot, label = load_robot(
+            args.robot, args.dtype, args.tip, args.base, trust_xacro=args.trust_xacro
+        )
+        frame_name = _frame_name(robot, args.frame)
         q, qd, source = _velocity_inputs(args, robot)
         fmt, path = _output_choice(args, label, len(q))
         writer = None if path is None else _open_writer(args, robot, frame_name, path, fmt, len(q))
@@ -915,7 +1066,7 @@ def _report(args, robot, frame, q, source, summary, stats, path, failures) -> No
         f"frame            {frame}, reference {args.reference}, "
         f"representation {args.representation}",
         f"configurations   {_source_line(args, robot, q, source)}",
-        f"dtype            {args.dtype}",
+        f"dtype            {_dtype_note(args.dtype)}",
         f"chunks           {sum(s.n_chunks for s in stats)}: {checked:,} checked rows, then "
         f"{main.n_chunks if len(stats) > 1 else 0} x {main.chunk_size:,} "
         f"({sum(s.padding for s in stats):,} padding rows)",
@@ -937,6 +1088,16 @@ def _report(args, robot, frame, q, source, summary, stats, path, failures) -> No
     print("jaxkin velocities", file=stream)
     for line in lines:
         print(f"  {line}", file=stream)
+
+
+def _dtype_note(dtype: str) -> str:
+    """The summary's dtype line: the command line's float64 is not the library's default."""
+    if dtype == "float64":
+        return (
+            "float64 (jax_enable_x64 turned on for this run; the library follows JAX's float32 "
+            "default: jax.config.update('jax_enable_x64', True) for float64 in Python)"
+        )
+    return "float32 (--dtype float32, JAX's default; the command line's default is float64)"
 
 
 def _output_line(path: str | None, failures: list[str]) -> str:
@@ -973,8 +1134,7 @@ def read_configurations(path: str, robot: jk.Robot, dtype: Any):
     CSV layout. Every problem with the file is a :class:`UsageError` naming it.
     """
     if path == "-":
-        data = sys.stdin.buffer.read() if hasattr(sys.stdin, "buffer") else sys.stdin.read()
-        data = data.encode() if isinstance(data, str) else data
+        data = _read_stdin()
         if data[:2] == b"PK":
             q, qd = _read_npz(io.BytesIO(data), "standard input", robot)
         else:
@@ -995,6 +1155,35 @@ def read_configurations(path: str, robot: jk.Robot, dtype: Any):
     return q.astype(dtype), None if qd is None else qd.astype(dtype)
 
 
+def _read_stdin() -> bytes:
+    """Standard input, read block by block: at most ``MAX_INPUT_BYTES`` (an endless stream is
+    refused once it passes the cap, never held whole)."""
+    stream = getattr(sys.stdin, "buffer", sys.stdin)
+    blocks, size = [], 0
+    while size <= MAX_INPUT_BYTES:
+        block = stream.read(min(STDIN_BLOCK, MAX_INPUT_BYTES + 1 - size))
+        if not block:
+            break
+        block = block.encode() if isinstance(block, str) else block
+        blocks.append(block)
+        size += len(block)
+    if size > MAX_INPUT_BYTES:
+        raise UsageError(
+            f"standard input holds more than {_bytes(MAX_INPUT_BYTES)} (the cap on configurations "
+            "read, MAX_INPUT_BYTES); pass a file (--configurations PATH: a CSV up to the cap, an "
+            ".npz whose q and qd are each up to it) or split the input"
+        )
+    return b"".join(blocks)
+
+
+def _bytes(n: int) -> str:
+    """``n`` bytes in a unit that fits (``1 GiB``, ``12.5 MiB``, ``300 bytes``)."""
+    for unit, size in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:,.1f}".removesuffix(".0") + f" {unit}"
+    return f"{n:,} bytes"
+
+
 def _read_file(p: pathlib.Path, robot: jk.Robot):
     if not p.is_file():
         raise UsageError(
@@ -1003,6 +1192,13 @@ def _read_file(p: pathlib.Path, robot: jk.Robot):
     try:
         if p.suffix.lower() == ".npz":
             return _read_npz(p, p, robot)
+        size = p.stat().st_size
+        if size > MAX_INPUT_BYTES:
+            raise UsageError(
+                f"configurations file {p} is {_bytes(size)}, over the {_bytes(MAX_INPUT_BYTES)} "
+                "cap on a CSV file (MAX_INPUT_BYTES); split it, or save q (and qd) with "
+                "numpy.savez"
+            )
         # utf-8-sig: Excel's byte order mark; newline="": quoted fields may hold line breaks
         with open(p, encoding="utf-8-sig", errors="replace", newline="") as f:
             return _read_csv(f, p, robot)
@@ -1018,17 +1214,23 @@ def _joint_shape_error(path, what: str, got: tuple, robot: jk.Robot) -> UsageErr
 
 
 def _read_npz(source: Any, p: Any, robot: jk.Robot):
+    """``(q, qd or None)`` from the members ``q`` and ``qd`` of an .npz; no other member is
+    read, and each used one is sized (:func:`_npz_member`) before it is decompressed."""
     if not zipfile.is_zipfile(source):
         raise UsageError(f"{p} is not an .npz file (numpy.savez writes one); or use a .csv file")
     try:
         with np.load(source, allow_pickle=False) as f:
-            arrays = {k: f[k] for k in f.files}
-    except (ValueError, zipfile.BadZipFile, EOFError) as e:
+            if "q" not in f.files:
+                raise UsageError(
+                    f"{p} has no array 'q' (it has {sorted(f.files) or 'none'}); save q of shape "
+                    "(N, dof)"
+                )
+            arrays = {k: _npz_member(f, k, p) for k in ("q", "qd") if k in f.files}
+    # zlib.error: corrupt data; RuntimeError: an encrypted member; NotImplementedError: a
+    # compression method zipfile lacks
+    except (ValueError, zipfile.BadZipFile, EOFError, zlib.error, RuntimeError,
+            NotImplementedError) as e:  # fmt: skip
         raise UsageError(f"cannot read {p} as .npz: {e}") from None
-    if "q" not in arrays:
-        raise UsageError(
-            f"{p} has no array 'q' (it has {sorted(arrays) or 'none'}); save q of shape (N, dof)"
-        )
     out = []
     for name in ("q", "qd"):
         a = arrays.get(name)
@@ -1050,33 +1252,54 @@ def _read_npz(source: Any, p: Any, robot: jk.Robot):
     return out[0], out[1]
 
 
+def _npz_member(f: Any, key: str, p: Any) -> np.ndarray:
+    """The array ``key`` of the open .npz ``f``, read only when its declared sizes fit: the
+    zip's uncompressed size of the member and its .npy header's shape x itemsize, each at most
+    ``MAX_INPUT_BYTES`` (numpy allocates what the header declares before reading)."""
+    member = f"{key}.npy" if f"{key}.npy" in f.zip.namelist() else key
+    declared = f.zip.getinfo(member).file_size
+    with f.zip.open(member) as fp:
+        version = np.lib.format.read_magic(fp)
+        header = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, _, dtype = header(fp)
+    nbytes = math.prod(shape) * dtype.itemsize
+    if max(declared, nbytes) > MAX_INPUT_BYTES:
+        raise UsageError(
+            f"{p}: array {key!r} declares {_bytes(max(declared, nbytes))} (shape {shape}, dtype "
+            f"{dtype}), over the {_bytes(MAX_INPUT_BYTES)} cap on configurations read "
+            "(MAX_INPUT_BYTES); split the configurations into several files"
+        )
+    if nbytes > declared:
+        raise UsageError(
+            f"{p}: array {key!r} declares shape {shape} ({_bytes(nbytes)}) but its member holds "
+            f"{_bytes(declared)}; the file is corrupt"
+        )
+    return f[key]
+
+
 def _read_csv(f: Any, p: Any, robot: jk.Robot):
-    """Rows of a CSV text stream (``csv`` module: quoted fields, as R writes; comment lines
-    start with #): ``(q, qd or None)``."""
-    where = [0]  # line number of the last line read
-
-    def lines() -> Iterator[str]:
-        for lineno, line in enumerate(f, start=1):
-            if line.strip() and not line.lstrip().startswith("#"):
-                where[0] = lineno
-                yield line
-
+    """Rows of a CSV text stream (:func:`jaxkin.batch.csv_records`: the ``csv`` module, so
+    quoted fields as R and jaxkin write them; ``#`` comment lines and blank lines between
+    records): ``(q, qd or None)``. Numbers may be surrounded by blanks."""
     header, rows = None, []
     try:
-        for fields in csv.reader(lines()):
-            fields = [x.strip() for x in fields]
+        for lineno, fields in jk.batch.csv_records(f, source=p):
             try:
-                rows.append((where[0], [float(x) for x in fields]))
+                rows.append((lineno, [float(x) for x in fields]))
             except ValueError:
                 if header is None and not rows:
                     header = fields
                     continue
                 raise UsageError(
-                    f"{p} line {where[0]}: not a row of numbers: {','.join(fields)[:80]!r}"
+                    f"{p} line {lineno}: not a row of numbers: {','.join(fields)[:80]!r}"
                 ) from None
-    except csv.Error as e:
-        raise UsageError(f"{p} line {where[0]}: {e}") from None
-    if header and header[0] == "":  # R's write.csv: a first column of row names
+    except jk.JaxkinError as e:
+        raise UsageError(str(e)) from None
+    if header and header[0].strip() == "":  # R's write.csv: a first column of row names
         header, rows = header[1:], [(i, r[1:]) for i, r in rows]
     order = None if header is None else _csv_columns(header, p, robot)
     width = None if header is None else len(header)
@@ -1102,15 +1325,27 @@ def _read_csv(f: Any, p: Any, robot: jk.Robot):
 
 
 def _csv_columns(header: list[str], p: Any, robot: jk.Robot) -> list[int]:
-    """Column indices of q (then qd, if given) in joint order, from a header line."""
+    """Column indices of q (then qd, if given) in joint order, from a header line: joint names
+    or ``q_<joint>``, and optionally ``qd_<joint>``. A column matches as written, else with
+    surrounding blanks removed; where every column reads as ``q_<joint>`` or ``qd_<joint>``
+    (as jaxkin writes them), that reading wins over a joint named like the column."""
     names = list(robot.joint_names)
+
+    def prefixed(h: str) -> tuple[str, str] | None:
+        if h.startswith("qd_") and h[3:] in names:
+            return ("qd", h[3:])
+        return ("q", h[2:]) if h.startswith("q_") and h[2:] in names else None
+
+    def named(h: str) -> tuple[str, str] | None:
+        if h.startswith("qd_") and h[3:] in names:
+            return ("qd", h[3:])
+        return ("q", h) if h in names else prefixed(h)
+
+    read = prefixed if all(prefixed(h) or prefixed(h.strip()) for h in header) else named
     columns: dict[tuple[str, str], int] = {}
     for k, h in enumerate(header):
-        if h.startswith("qd_") and h[3:] in names:
-            key = ("qd", h[3:])
-        elif h in names or (h.startswith("q_") and h[2:] in names):
-            key = ("q", h if h in names else h[2:])
-        else:
+        key = read(h) or read(h.strip())
+        if key is None:
             raise UsageError(
                 f"{p}: unknown column {h!r}; columns are joint names {names} (or q_<joint>) "
                 "and optionally qd_<joint>"
@@ -1135,9 +1370,11 @@ def _csv_columns(header: list[str], p: Any, robot: jk.Robot) -> list[int]:
 # ---------------------------------------------------------------------- jacobian
 def cmd_jacobian(args: argparse.Namespace) -> int:
     with _x64(args.dtype == "float64"):
-        robot, _ = load_robot(args.robot, args.dtype, args.tip, args.base)
+        robot, _ = load_robot(
+            args.robot, args.dtype, args.tip, args.base, trust_xacro=args.trust_xacro
+        )
         q = _joint_values(args, robot)
-        frame = robot.frame_names[robot.frame_index(args.frame)]
+        frame = _frame_name(robot, args.frame)
         if args.analytical:
             J = jk.analytical_jacobian(robot, q, args.analytical, frame=frame, point=args.point)
         else:
