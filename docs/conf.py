@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import os
 import pathlib
 
 from docutils import nodes
+from sphinx import addnodes
 from sphinx.util.docutils import SphinxDirective
 
 import jaxkin
@@ -30,6 +32,8 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
+    # MathJax 3 shipped in the package and copied into _static/mathjax: equations render offline
+    "sphinx-mathjax-offline",
     "matplotlib.sphinxext.plot_directive",
     "myst_nb",
 ]
@@ -72,12 +76,26 @@ html_title = f"jaxkin {version}"
 html_static_path: list[str] = []
 
 
+def _public() -> dict[int, str]:
+    """``id(object) -> "jaxkin.name"`` for the functions and classes the package re-exports
+    (``jk.fk``): they are documented once, under that name, on the first API page."""
+    return {
+        id(obj): f"jaxkin.{name}"
+        for name, obj in vars(jaxkin).items()
+        if not name.startswith("_") and (inspect.isfunction(obj) or inspect.isclass(obj))
+    }
+
+
+PUBLIC = _public()
+
+
 def _lookup(target: str, module: str | None):
     """``(object, documented name)`` for a dotted ``target``, looked up as Python would: from
-    ``jaxkin`` when it starts with ``jaxkin.``, else in the namespace of the module whose
-    docstring refers to it; ``(None, None)`` when no such object exists. The documented name is
-    the home ``module.qualname`` of the innermost class or function on the path plus the rest
-    (``jaxkin.Robot.tip_frame`` -> ``jaxkin.model.Robot.tip_frame``)."""
+    ``jaxkin`` when it starts with ``jaxkin.``, else in the namespace of ``module``, the module
+    whose docstring refers to it; ``(None, None)`` when no such object exists. The documented
+    name is the public name (``jaxkin.fk``) or else the home ``module.qualname`` of the innermost
+    class or function on the path, plus the rest (``jaxkin.Robot.tip_frame`` stays itself,
+    ``jaxkin.jacobians.FrameJacobian.J`` is documented where it is defined)."""
     parts = target.split(".")
     if parts[0] == "jaxkin":
         obj, parts = jaxkin, parts[1:]
@@ -91,23 +109,49 @@ def _lookup(target: str, module: str | None):
         if obj is None:
             return None, None
         home, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
-        if isinstance(home, str) and isinstance(qualname, str) and home.startswith("jaxkin"):
-            name = ".".join([home, qualname, *parts[i + 1 :]])
+        if id(obj) in PUBLIC:
+            name = ".".join([PUBLIC[id(obj)], *parts[i + 1 :]])
+        elif isinstance(home, str) and isinstance(qualname, str) and home.startswith("jaxkin"):
+            outer, *inner = qualname.split(".")
+            public = PUBLIC.get(id(getattr(importlib.import_module(home), outer, None)))
+            name = ".".join([public or f"{home}.{outer}", *inner, *parts[i + 1 :]])
     return obj, name
 
 
+def _home_module(node) -> str | None:
+    """The module a docstring's reference is read in: the home module of the innermost entry
+    that holds it (``jaxkin.fk``'s docstring speaks in ``jaxkin.kinematics``), else the page's."""
+    module = node.get("py:module")
+    entry = node.parent
+    while entry is not None and not isinstance(entry, addnodes.desc):
+        entry = entry.parent
+    signature = entry and next(
+        (c for c in entry.children if isinstance(c, addnodes.desc_signature)), None
+    )
+    if not signature or not signature.get("module"):
+        return module
+    obj = importlib.import_module(signature["module"])
+    for part in signature.get("fullname", "").split("."):
+        obj = getattr(obj, part, None)
+        home = getattr(obj, "__module__", None)
+        if isinstance(home, str) and home.startswith("jaxkin"):
+            module = home
+    return module
+
+
 def _resolve_by_import(app, env, node, contnode):
-    """Resolve what a reader of the source would: a re-export (``jaxkin.geometric_jacobian`` is
-    documented as ``jaxkin.jacobians.geometric_jacobian``) or a name imported into the module
-    (``JaxkinPrecisionWarning`` in ``jaxkin.build``) links to where it is documented. A name that
-    exists but has no entry here (a private helper such as ``_chunking``, a constant outside
-    ``__all__``) is rendered as code, unlinked. A name that does not exist stays a missing
-    reference, which fails the strict build."""
+    """Resolve what a reader of the source would: a name in the docstring's home module or a
+    re-export links to where it is documented (``geometric_jacobian`` in ``jaxkin.analysis``
+    and ``jaxkin.jacobians.geometric_jacobian`` to ``jaxkin.geometric_jacobian``; a name
+    imported into the module, such as ``JaxkinPrecisionWarning`` in ``jaxkin.build``, likewise).
+    A name that exists but has no entry here (a private helper such as ``_chunking``, a constant
+    outside ``__all__``) is rendered as code, unlinked. A name that does not exist stays a
+    missing reference, which fails the strict build."""
     if node.get("refdomain") != "py":
         return None
     target = node.get("reftarget", "").lstrip("~.")
     try:
-        obj, name = _lookup(target, node.get("py:module"))
+        obj, name = _lookup(target, _home_module(node))
     except ImportError:
         return None
     if obj is None:
@@ -120,6 +164,15 @@ def _resolve_by_import(app, env, node, contnode):
         if found is not None:
             return found
     return contnode
+
+
+def _skip_public_on_module_pages(app, what, name, obj, skip, options):
+    """A module page leaves out what the package re-exports: ``jaxkin.fk`` is documented once,
+    on the public API page, not again as ``jaxkin.kinematics.fk`` (nor as
+    ``jaxkin.ik.sample_configurations``, which ``jaxkin.ik`` imports and lists)."""
+    if what == "module" and id(obj) in PUBLIC:
+        return True
+    return None
 
 
 def _drop_field_aliases(app, what, name, obj, options, lines):
@@ -166,8 +219,12 @@ class CliHelp(SphinxDirective):
 
 
 def setup(app):
+    # The bundled MathJax's SVG output (the extension sets tex-chtml.js, whose web fonts browsers
+    # may refuse to load from file:// pages); a path relative to _static/, so never a CDN.
+    app.config.mathjax_path = "mathjax/tex-svg.js"
     app.add_directive("jaxkin-cli-help", CliHelp)
     app.connect("missing-reference", _resolve_by_import)
+    app.connect("autodoc-skip-member", _skip_public_on_module_pages)
     app.connect("autodoc-process-docstring", _drop_field_aliases)
     app.connect("build-finished", _redirect_root)
     return {"parallel_read_safe": True}

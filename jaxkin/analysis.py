@@ -174,6 +174,15 @@ def singular_values(J: Any, rows: Any = "all") -> jax.Array:
     ``m`` is the number of selected rows (6, 3 or ``len(rows)``). Differentiable everywhere
     (``d sigma_i = u_i^T dJ v_i``), including at repeated and zero singular values. Non-finite
     ``J``: see the module doc (raises eagerly; NaN under a trace).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> jk.singular_values(J, rows=[0, 1]).round(6).tolist()  # the (v_x, v_y) rows
+    [1.618034, 0.618034]
+    >>> J0 = jk.geometric_jacobian(robot, jnp.zeros(2))  # stretched out: rank 1
+    >>> jk.singular_values(J0, rows=[0, 1]).round(6).tolist()
+    [2.236068, 0.0]
     """
     Jr, guard = _guarded(J, rows, "jk.singular_values")
     return guard(jnp.linalg.svd(Jr, compute_uv=False))
@@ -221,6 +230,14 @@ def manipulability(J: Any, measure: str = "yoshikawa", rows: Any = "all") -> jax
     sequence of row indices. ``"all"`` mixes metres and radians. Values and gradients (``jax.grad``
     with respect to ``J``) are finite at exact singularities. Non-finite ``J`` (module doc): raises
     eagerly; NaN under a trace.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> round(float(jk.manipulability(J, rows=[0, 1])), 6)  # |det J| = l1 l2 |sin q2|
+    1.0
+    >>> round(float(jk.manipulability(J, "min_singular_value", rows=[0, 1])), 6)
+    0.618034
     """
     fn = "jk.manipulability"
     _check_measure(measure, fn)
@@ -242,6 +259,14 @@ def condition_number(J: Any, rows: Any = "all") -> jax.Array:
 
     For a bounded, differentiable measure use ``manipulability(J, "inverse_condition")``.
     Non-finite ``J`` (module doc): raises eagerly; NaN (not ``inf``) under a trace.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> round(float(jk.condition_number(J, rows=[0, 1])), 6)  # 1.618034 / 0.618034
+    2.618034
+    >>> float(jk.condition_number(jk.geometric_jacobian(robot, jnp.zeros(2)), rows=[0, 1]))
+    inf
     """
     Jr, guard = _guarded(J, rows, "jk.condition_number")
     s = _task_singular_values(Jr)
@@ -260,6 +285,15 @@ def near_singular(
 
     Non-finite ``J`` or ``threshold`` (module doc): raises eagerly; True ("possibly singular")
     under a trace.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, 0.01]))  # nearly stretched out
+    >>> bool(jk.near_singular(J, 0.05, rows=[0, 1]))
+    True
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))  # elbow at a right angle
+    >>> bool(jk.near_singular(J, 0.05, rows=[0, 1]))
+    False
     """
     fn = "jk.near_singular"
     _check_measure(measure, fn)
@@ -399,6 +433,13 @@ def velocity_ellipsoid(J: Any, rows: Any = "translation") -> Ellipsoid:
     mixing metres and radians has no geometric meaning. Radii are differentiable everywhere;
     axes carry no derivative (``stop_gradient``: principal directions are not differentiable where
     radii coincide). Non-finite ``J`` (module doc): raises eagerly; NaN under a trace.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))
+    >>> E = jk.velocity_ellipsoid(J, rows=[0, 1])  # the tip's (v_x, v_y) for |qd| <= 1
+    >>> E.radii.round(6).tolist()
+    [1.618034, 0.618034]
     """
     U, s, guard = _ellipsoid(J, rows, "jk.velocity_ellipsoid")
     return guard(Ellipsoid(axes=U, radii=s))
@@ -429,6 +470,13 @@ def joint_torques(J: Any, wrench: Any) -> jax.Array:
     the environment (equivalently, what an external wrench ``-F`` loads them with); power:
     ``F . (J qd) == tau . qd``. Non-finite ``J`` or ``wrench`` (module doc): raises eagerly; NaN
     under a trace.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))  # tip at (1, 1)
+    >>> F = jnp.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0])  # 1 N downwards at the tip
+    >>> jk.joint_torques(J, F).round(6).tolist()  # the torques that hold it
+    [-1.0, 0.0]
     """
     fn = "jk.joint_torques"
     J = check_J(J, fn, f"jax.vmap({fn}, in_axes=(0, None))(Js, wrench)")

@@ -129,6 +129,14 @@ def pinv_velocity(
     ``W_x``-weighted least-squares solutions (``task_weights``); weights are positive vectors or
     SPD matrices. ``v`` is in the Jacobian's reference and row order (``[v; omega]``).
     Non-finite input: module doc (raises eagerly; NaN under a trace).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q = jnp.array([0.0, jnp.pi / 2])
+    >>> J = jk.geometric_jacobian(robot, q)[:2]  # (v_x, v_y) rows
+    >>> qd = jk.pinv_velocity(J, jnp.array([0.0, 1.0]), rcond=1e-6)  # the tip up at 1 m/s
+    >>> qd.round(6).tolist(), (J @ qd).round(6).tolist()
+    ([1.0, -1.0], [0.0, 1.0])
     """
     fn = "jk.pinv_velocity"
     hint = f"jax.vmap(lambda J, v: {fn}(J, v, rcond=rcond))(Js, vs)"
@@ -182,6 +190,15 @@ def damped_least_squares(
       joint_weights, task_weights: positive vectors or SPD matrices (see the module doc).
 
     Non-finite input: module doc (raises eagerly; NaN under a trace).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, 1e-4]))[:2]  # nearly stretched out
+    >>> v = jnp.array([1.0, 0.0])  # along the arm: out of reach
+    >>> float(jnp.abs(jk.pinv_velocity(J, v, rcond=1e-12)).max()) > 1e3
+    True
+    >>> float(jnp.abs(jk.damped_least_squares(J, v, damping=0.1)).max()) < 10
+    True
     """
     fn = "jk.damped_least_squares"
     hint = f"jax.vmap(lambda J, v: {fn}(J, v, damping=damping))(Js, vs)"
@@ -256,6 +273,15 @@ def null_space_projector(J: Any, *, rcond: float | None = None, damping: Any = N
     space: ``J N = 0``, ``N^2 = N``) or the damped inverse (``damping=``: ``J N = O(lambda^2)``,
     not exactly a projector, but smooth through singularities). Give exactly one. Non-finite
     input: module doc (raises eagerly; NaN under a trace).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))[5:]  # omega_z only
+    >>> N = jk.null_space_projector(J, rcond=1e-6)
+    >>> (N @ jnp.array([1.0, 0.0])).round(6).tolist()  # the part of qd that keeps omega_z
+    [0.5, -0.5]
+    >>> (J @ N).round(6).tolist()
+    [[0.0, 0.0]]
     """
     fn = "jk.null_space_projector"
     how = "rcond=rcond" if damping is None else "damping=damping"

@@ -328,6 +328,14 @@ def change_reference(
     """Re-express a (6, dof) Jacobian of the frame with pose ``T`` (4, 4) in another reference.
 
     ``local = blkdiag(R^T, R^T) world_aligned``; ``world = Ad(T) local``.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q = jnp.array([0.0, jnp.pi / 2])
+    >>> J, T = jk.geometric_jacobian(robot, q), jk.fk(robot, q)
+    >>> J_local = jk.change_reference(J, T, "world_aligned", "local")
+    >>> bool(jnp.allclose(J_local, jk.geometric_jacobian(robot, q, reference="local")))
+    True
     """
     check_reference(from_reference)
     check_reference(to_reference)

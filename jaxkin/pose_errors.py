@@ -20,7 +20,15 @@ __all__ = ["pose_error", "pose_error_norms", "pose_residual"]
 def pose_error(T: Any, T_desired: Any) -> jax.Array:
     """Pose error ``[p_d - p; log(R_d R^T)]`` (6,), world axes: the twist (times 1 s) that moves
     pose ``T`` to ``T_desired`` along a screw-free path (position straight, orientation about a
-    fixed world axis). NaN-free, also at zero error (``log_so3``'s Taylor branch)."""
+    fixed world axis). NaN-free, also at zero error (``log_so3``'s Taylor branch).
+
+    >>> import jax, jax.numpy as jnp, jaxkin as jk
+    >>> T = jnp.eye(4)
+    >>> T_desired = T.at[:3, :3].set(jk.spatial.rot_z(0.1)).at[0, 3].set(0.2)
+    >>> e = jax.jit(jk.pose_error)(T, T_desired)  # jitted: one compile, not one per operation
+    >>> [round(x, 6) for x in e.tolist()]  # [dp; rotation vector]
+    [0.2, 0.0, 0.0, 0.0, 0.0, 0.1]
+    """
     T = jnp.asarray(T)
     Td = jnp.asarray(T_desired)
     dp = Td[:3, 3] - T[:3, 3]

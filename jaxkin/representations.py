@@ -112,7 +112,15 @@ def from_matrix(R, representation: str = "rpy") -> jax.Array:
 
 
 def rate_matrix(phi, representation: str = "rpy") -> jax.Array:
-    """``B(phi)`` (3, 3) with ``omega = B(phi) @ phi_dot``, omega in world axes (closed form)."""
+    """``B(phi)`` (3, 3) with ``omega = B(phi) @ phi_dot``, omega in world axes (closed form).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> B = jk.rate_matrix(jnp.zeros(3))  # rpy at zero: omega = (roll_dot, pitch_dot, yaw_dot)
+    >>> bool(jnp.allclose(B, jnp.eye(3)))
+    True
+    >>> round(float(jnp.linalg.det(jk.rate_matrix(jnp.array([0.0, 1.5, 0.0])))), 6)  # cos(pitch)
+    0.070737
+    """
     check_representation(representation)
     phi = _check_phi(phi)
     if representation == "rpy":
@@ -169,6 +177,12 @@ def representation_margin(phi, representation: str = "rpy") -> jax.Array:
 
     ``|cos(pitch)|`` for rpy, ``|sin(theta)|`` for zyz, ``1 - |w| / (2 pi)`` for rotvec (which is
     never singular on its principal branch). The rate matrix's inverse grows like 1 / margin.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> float(jk.representation_margin(jnp.zeros(3)))  # rpy, level
+    1.0
+    >>> float(jk.representation_margin(jnp.array([0.0, jnp.pi / 2, 0.0])).round(6))  # gimbal lock
+    0.0
     """
     check_representation(representation)
     phi = _check_phi(phi)
@@ -185,6 +199,14 @@ def analytical_from_geometric(J_geometric, phi, representation: str = "rpy") -> 
     """``J_a = blkdiag(I, B(phi)^-1) @ J_g`` for a (6, dof) world-aligned geometric Jacobian.
 
     Undefined where ``B(phi)`` is singular; check :func:`representation_margin` first.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q = jnp.array([0.0, jnp.pi / 2])
+    >>> phi = jk.spatial.matrix_to_rpy(jk.fk(robot, q)[:3, :3])
+    >>> Ja = jk.analytical_from_geometric(jk.geometric_jacobian(robot, q), phi)
+    >>> bool(jnp.allclose(Ja, jk.analytical_jacobian(robot, q, "rpy")))
+    True
     """
     J = jnp.asarray(J_geometric)
     if J.ndim != 2 or J.shape[0] != 6:

@@ -120,6 +120,14 @@ def classify_twist(V: Any, tol: float = 1e-9) -> str:
     Host-side: returns a Python string, so it raises :class:`~jaxkin.JaxkinError` under
     ``jit``/``vmap``/``grad``, and for a non-finite ``V`` or ``tol`` (the non-finite policy of
     :mod:`jaxkin.analysis`: a string cannot be NaN).
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> jk.classify_twist(jnp.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    'pure_translation'
+    >>> jk.classify_twist(jnp.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]))
+    'pure_rotation'
+    >>> jk.classify_twist(jnp.array([0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))  # a screw
+    'general'
     """
     fn = "jk.classify_twist"
     V = check_twist(V, fn)

@@ -26,12 +26,15 @@ import nbformat
 
 HERE = pathlib.Path(__file__).resolve().parent
 
-# Where a notebook installs jaxkin from when it is missing, relative to the notebook: the jaxkin
-# checkout that holds it. The only place the package source is named; every notebook gets it.
-PACKAGE_SOURCE = ".."
-
-INSTALL_CELL = f"""\
-# Runs unchanged where jaxkin is installed; elsewhere installs it from this notebook's checkout.
+# Every notebook's first code cell, self-contained (jaxkin is not installed yet where it acts).
+# jaxkin is not on PyPI, and a package of that name there would be someone else's: the cell never
+# installs by name, only from a jaxkin checkout above the notebook or from a wheel the user puts
+# beside it.
+INSTALL_CELL = """\
+# Needs jaxkin: does nothing where it imports. Elsewhere installs jaxkin[notebooks] from the jaxkin
+# checkout holding this notebook or, without one, from a wheel jaxkin-*.whl in this directory
+# (jaxkin is not on PyPI; in a checkout, `pip install build && python3 -m build --wheel` writes
+# the wheel, dist/jaxkin-VERSION-py3-none-any.whl).
 import importlib.util
 
 if importlib.util.find_spec("jaxkin") is None:
@@ -39,16 +42,24 @@ if importlib.util.find_spec("jaxkin") is None:
     import subprocess
     import sys
 
-    source = pathlib.Path("{PACKAGE_SOURCE}").resolve()
-    print(
-        f"installing jaxkin[notebooks] from {{source}}; if that fails, run "
-        '`pip install "jaxkin[notebooks] @ file:///path/to/jaxkin"` (a checkout or the wheel '
-        "from `pip wheel --no-deps .`) and restart the kernel"
-    )
-    subprocess.run(
-        [sys.executable, "-m", "pip", "install", f"jaxkin[notebooks] @ {{source.as_uri()}}"],
-        check=True,
-    )"""
+    here = pathlib.Path.cwd().resolve()
+    checkouts = [
+        d
+        for d in (here, *here.parents)
+        if (d / "pyproject.toml").is_file()
+        and 'name = "jaxkin"' in (d / "pyproject.toml").read_text(errors="replace")
+    ]
+    wheels = sorted(here.glob("jaxkin-*.whl"), key=lambda p: p.stat().st_mtime)
+    if not checkouts and not wheels:
+        raise RuntimeError(
+            f"jaxkin is not installed, no jaxkin checkout holds {here} and it has no "
+            "jaxkin-*.whl: build the wheel in a jaxkin checkout (python3 -m build --wheel), "
+            "copy dist/jaxkin-*.whl here and run this cell again"
+        )
+    source = checkouts[0] if checkouts else wheels[-1]
+    print(f"installing jaxkin[notebooks] from {source}")
+    pip = [sys.executable, "-m", "pip", "install", f"jaxkin[notebooks] @ {source.as_uri()}"]
+    subprocess.run(pip, check=True)"""
 
 KERNELSPEC = {"display_name": "Python 3", "language": "python", "name": "python3"}
 CELL_TIMEOUT_S = 300

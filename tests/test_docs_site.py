@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import html as html_module
 import importlib.util
+import json
 import os
 import pathlib
 import re
@@ -21,7 +22,7 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
-DOCS_EXTRA = ("sphinx", "myst_nb", "furo")
+DOCS_EXTRA = ("sphinx", "myst_nb", "furo", "sphinx-mathjax-offline", "hypothesis", "matplotlib")
 
 
 def _missing_docs_extra() -> list[str]:
@@ -56,15 +57,137 @@ def test_strict_build_has_every_page(site):
 
 
 def test_api_reference_comes_from_the_docstrings(site):
-    html = (site / "docs/api/kinematics.html").read_text(encoding="utf-8")
-    # the function's entry, its docstring's first sentence and its example, rendered
-    assert 'id="jaxkin.jacobians.geometric_jacobian"' in html
+    html = (site / "docs/api/public.html").read_text(encoding="utf-8")
+    # the function's entry, under the name users call it by, its docstring's first sentence and
+    # its example, rendered
+    assert 'id="jaxkin.geometric_jacobian"' in html
     text = _text(html)
     assert "Built column by column from one forward pass" in text
     assert ">>> J = jk.geometric_jacobian(robot, jnp.array([0.0, jnp.pi / 2]))" in text
-    # a re-exported name in a docstring links to where it is documented
+    # a name in a docstring, re-exported or in the docstring's module, links to its entry
     analysis = (site / "docs/api/analysis.html").read_text(encoding="utf-8")
-    assert 'href="kinematics.html#jaxkin.jacobians.geometric_jacobian"' in analysis
+    assert 'href="public.html#jaxkin.geometric_jacobian"' in analysis
+    assert 'href="#jaxkin.geometric_jacobian"' in html
+
+
+def _api_pages() -> list[str]:
+    """The API pages (``api/NAME``) in the order of the tables of contents in docs/index.md."""
+    index = (DOCS / "index.md").read_text(encoding="utf-8")
+    return re.findall(r"^(api/\w+)$", index, re.M)
+
+
+def _entries(html: str) -> list[str]:
+    """The ids of the documented objects on a page (functions, classes, members), in order."""
+    return re.findall(r'<dt class="sig sig-object py" id="([^"]+)"', html)
+
+
+def _object(dotted: str):
+    """The object a documented id names, imported as Python would; None where there is none."""
+    import importlib
+
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for part in parts[i:]:
+            obj = getattr(obj, part, None)
+        return obj
+    return None
+
+
+def _public_names() -> dict[str, object]:
+    """What ``import jaxkin as jk`` offers to call: the re-exported functions and classes."""
+    import inspect
+
+    import jaxkin
+
+    return {
+        name: obj
+        for name, obj in vars(jaxkin).items()
+        if not name.startswith("_") and (inspect.isfunction(obj) or inspect.isclass(obj))
+    }
+
+
+def test_api_reference_starts_with_the_public_names_each_documented_once(site):
+    import inspect
+
+    pages = _api_pages()
+    assert pages and pages[0] == "api/public", pages
+    entries = {p: _entries((site / f"docs/{p}.html").read_text(encoding="utf-8")) for p in pages}
+    public = _public_names()
+    # the first entry is one a user calls: jk.fk, not a building block such as ForwardPass
+    first = entries[pages[0]][0]
+    assert first.startswith("jaxkin.") and first.count(".") == 1, first
+    assert inspect.isfunction(public.get(first.removeprefix("jaxkin."))), first
+    # every public name is on the first page under the name users call it by
+    missing = sorted(n for n in public if f"jaxkin.{n}" not in entries[pages[0]])
+    assert not missing, f"add these to docs/api/public.md: {missing}"
+    # no function or class is documented twice (jaxkin.ik lists sample_configurations, which
+    # is documented once, as jaxkin.sample_configurations)
+    where: dict[int, list[str]] = {}
+    for ids in entries.values():
+        for dotted in ids:
+            obj = _object(dotted)
+            if inspect.isfunction(obj) or inspect.isclass(obj):
+                where.setdefault(id(obj), []).append(dotted)
+    twice = sorted(ids for ids in where.values() if len(ids) > 1)
+    assert not twice, twice
+    # the modules beyond the namespace are there (the IK's implicit derivatives included)
+    every = [dotted for ids in entries.values() for dotted in ids]
+    assert "jaxkin.ik_gradients.solution_tangent" in every
+    assert "jaxkin.robots.load" in every
+
+
+def test_api_reference_shows_no_private_name(site):
+    for page in _api_pages():
+        html = (site / f"docs/{page}.html").read_text(encoding="utf-8")
+        private = [e for e in _entries(html) if any(p.startswith("_") for p in e.split("."))]
+        assert not private, (page, private)
+        # nor in the text: a docstring that sends the reader to jaxkin._checks.check_q
+        mentions = sorted(set(re.findall(r"jaxkin\._\w+(?:\.\w+)*", _text(html))))
+        assert not mentions, (page, mentions)
+
+
+def test_site_loads_no_script_from_the_network_and_bundles_mathjax(site):
+    remote = re.compile(r"<(?:script|img|iframe)\b[^>]*\bsrc=\"(?:https?:)?//", re.I)
+    with_math = []
+    for page in sorted(site.rglob("*.html")):
+        html = page.read_text(encoding="utf-8")
+        found = remote.findall(html)
+        assert not found, (page.relative_to(site), found)
+        if 'class="math' in html:
+            with_math.append(page)
+    # the chapter's equations (notebooks 01-03) are on the site, and each page with math loads
+    # the MathJax shipped with it
+    assert len(with_math) >= 3, with_math
+    for page in with_math:
+        html = page.read_text(encoding="utf-8")
+        scripts = re.findall(r'<script[^>]*src="([^"]*mathjax[^"]*\.js)[^"]*"', html)
+        assert scripts, f"{page.relative_to(site)} has math but loads no MathJax"
+        for src in scripts:
+            path = (page.parent / src.split("?")[0]).resolve()
+            assert path.is_file() and path.stat().st_size > 100_000, (page, src)
+            assert site.resolve() in path.parents, (page, src)
+
+
+def test_equations_render_offline_in_headless_chromium(site):
+    import shutil
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("no chromium binary (Debian: apt-get install chromium)")
+    page = site / "notebooks/01_analytical_jacobian.html"
+    n_math = page.read_text(encoding="utf-8").count('class="math notranslate')
+    offline = "--host-resolver-rules=MAP * ~NOTFOUND"  # no host name resolves: no network
+    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", offline]
+    cmd += ["--virtual-time-budget=20000", "--dump-dom", page.as_uri()]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+    dom = proc.stdout
+    rendered = len(re.findall(r"<mjx-container\b[^>]*>\s*<svg\b", dom))
+    assert rendered >= n_math > 0, (rendered, n_math, proc.stderr[-2000:])
+    assert '<g data-mml-node="merror"' not in dom  # MathJax's mark of a formula it cannot read
 
 
 def _text(html: str) -> str:
@@ -130,3 +253,69 @@ def test_every_public_module_has_an_api_page():
     missing = sorted(modules - documented - NOT_ON_API_PAGES)
     assert not missing, f"add these to a page in docs/api/: {missing}"
     assert documented <= modules, sorted(documented - modules)
+
+
+def _normalise(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _required(names: list[str]) -> set[str]:
+    """The distributions ``names`` (requirement strings) need, with all they need in turn as
+    installed here (requirements behind an extra or another platform's marker left out)."""
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+
+    found: set[str] = set()
+    todo = [Requirement(n) for n in names]
+    while todo:
+        req = todo.pop()
+        name = _normalise(req.name)
+        if name in found or (req.marker is not None and not req.marker.evaluate({"extra": ""})):
+            continue
+        found.add(name)
+        try:
+            todo += [Requirement(r) for r in metadata.requires(req.name) or []]
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def test_docs_extra_holds_what_the_api_pages_import():
+    # `pip install -e ".[docs]"` then the build of docs/README.md: autodoc imports every module
+    # on the API pages (jaxkin.testing imports hypothesis), so each distribution that importing
+    # them loads, beyond what importing the required ones loads, must be jaxkin's own dependency
+    # or the docs extra's, directly or through theirs.
+    tomllib = pytest.importorskip("tomllib")
+    from importlib import metadata
+
+    if _missing_docs_extra():
+        pytest.skip(f"the docs extra is not installed (no {', '.join(_missing_docs_extra())})")
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    direct = project["dependencies"] + project["optional-dependencies"]["docs"]
+    allowed = _required(direct)
+    owners = metadata.packages_distributions()
+    direct_names = {_normalise(re.split(r"[\s\[<>=!~;]", r, maxsplit=1)[0]) for r in direct}
+    required_modules = sorted(
+        n for n, dists in owners.items() if direct_names & {_normalise(d) for d in dists}
+    )
+    pages = "".join(p.read_text(encoding="utf-8") for p in DOCS.glob("api/*.md"))
+    modules = sorted(set(re.findall(r"^\.\. automodule:: (\S+)$", pages, re.M)))
+    code = (
+        "import importlib, json, sys\n"
+        f"for m in {required_modules!r}:\n"
+        "    try:\n        importlib.import_module(m)\n"
+        "    except Exception:\n        pass\n"
+        "before = {n.split('.')[0] for n in sys.modules}\n"
+        f"for m in {modules!r}: importlib.import_module(m)\n"
+        "print(json.dumps(sorted({n.split('.')[0] for n in sys.modules} - before)))"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONWARNINGS": "ignore"}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True
+    )
+    imported = json.loads(proc.stdout.strip().splitlines()[-1])
+    loaded = {_normalise(d) for name in imported for d in owners.get(name, [])}
+    missing = sorted(loaded - allowed - {"jaxkin"})
+    assert not missing, f"add to the docs extra in pyproject.toml: {missing}"
