@@ -18,13 +18,18 @@ written with ``repr`` (shortest round-tripping float64), orientations as URDF rp
 (``R = Rz(yaw) Ry(pitch) Rx(roll)``, which rebuilds ``R`` to rounding even at pitch +-pi/2).
 
 What URDF cannot say raises :class:`~jaxkin.ModelError`: an independent joint scaled by a
-multiplier other than +-1, a revolute joint bounded on one side only, and (unless
-``prismatic_limit`` is given) an unbounded prismatic joint.
+multiplier other than +-1, a revolute joint bounded on one side only, (unless
+``prismatic_limit`` is given) an unbounded prismatic joint, and a robot, joint or frame name
+holding a character XML 1.0 cannot carry (``\\x00``-``\\x1f`` other than tab, line feed and
+carriage return, lone surrogates, ``\\ufffe``, ``\\uffff``): no URDF parser, jaxkin's included,
+would read the file back. Every other character is escaped (``quoteattr``: ``<``, ``&``,
+quotes, and tab/newline as character references, so they survive attribute normalisation).
 """
 
 from __future__ import annotations
 
 import math
+import re
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -90,6 +95,16 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
       for standard DH and a ``world`` root when ``robot.base`` is not the identity) and one
       revolute/continuous/prismatic joint per entry of ``q`` named ``robot.joint_names``.
       ``jk.load_urdf(to_urdf(robot))`` gives the same pose for every frame name.
+
+    >>> import jax.numpy as jnp, jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> text = jk.to_urdf(robot)
+    >>> text.count('type="revolute"')
+    2
+    >>> back = jk.load_urdf(text)  # the same robot again
+    >>> q = jnp.array([0.3, -0.5])
+    >>> bool(jnp.allclose(jk.fk(back, q), jk.fk(robot, q)))
+    True
     """
     _check_exportable(robot, prismatic_limit)
     w = _Writer(robot, prismatic_limit)
@@ -133,6 +148,21 @@ def _check_exportable(robot: Robot, prismatic_limit: float | None) -> None:
         )
     if prismatic_limit is not None and not (math.isfinite(prismatic_limit) and prismatic_limit > 0):
         raise ModelError(f"prismatic_limit must be a positive number, got {prismatic_limit!r}.")
+    named = [("robot", robot.name)]
+    named += [("joint", n) for n in robot.joint_names] + [("frame", n) for n in robot.frame_names]
+    for what, name in named:
+        bad = _XML_INVALID.search(name)
+        if bad:
+            raise ModelError(
+                f"to_urdf: {what} name {name!r} holds {bad.group()!r} (U+{ord(bad.group()):04X}), "
+                "a character XML 1.0 cannot carry; no URDF reader could load the file. Rename "
+                f"the {what} where the robot is built (from_dh/from_joints names, the model "
+                "file) without control characters."
+            )
+
+
+# Characters outside XML 1.0's Char production (tab, LF and CR are allowed).
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
 
 def _leaders(robot: Robot, mult: np.ndarray) -> dict[int, int]:

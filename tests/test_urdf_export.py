@@ -136,3 +136,33 @@ def test_errors_name_the_joint_and_the_fix():
         jax.jit(lambda r: jk.to_urdf(r) and 0)(jk.robots.load("two_link_planar"))
     with pytest.raises(jk.ModelError, match="expects a jaxkin Robot"):
         jk.to_urdf("panda")
+
+
+@pytest.mark.parametrize("bad", ["\x00", "\x01", "\x1b", "\ufffe", "\ud800"])
+@pytest.mark.parametrize("where", ["robot", "joint", "frame"])
+def test_names_xml_cannot_carry_are_refused_by_name(bad, where):
+    name = f"link{bad}2"
+    rows = [
+        dict(a=0.3, alpha=0.0, d=0.0, theta=0.0, joint="revolute", name="j1"),
+        dict(a=0.2, alpha=0.0, d=0.0, theta=0.0, joint="revolute", name="j2"),
+    ]
+    if where == "joint":
+        rows[1]["name"] = name
+        robot = jk.Robot.from_dh(rows)
+    elif where == "robot":
+        robot = jk.Robot.from_dh(rows, name=name)
+    else:
+        joints = [
+            dict(name="j1", type="revolute", parent="base", child="l1", axis=(0, 0, 1)),
+            dict(name="j2", type="revolute", parent="l1", child=name, xyz=(0.3, 0, 0)),
+        ]
+        robot = jk.Robot.from_joints(joints, root="base")
+    with pytest.raises(jk.ModelError, match=rf"{where} name .*XML 1\.0 cannot carry"):
+        jk.to_urdf(robot)
+
+
+def test_tabs_and_newlines_in_names_survive_the_round_trip():
+    rows = [dict(a=0.3, alpha=0.0, d=0.0, theta=0.0, joint="revolute", name="j\n1\t\r")]
+    robot = jk.Robot.from_dh(rows, name="two\nlines", dtype=np.float64)
+    back = jk.load_urdf(jk.to_urdf(robot), dtype=np.float64)
+    assert back.joint_names == robot.joint_names and back.name == robot.name
