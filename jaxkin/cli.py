@@ -1062,7 +1062,8 @@ def _report(args, robot, frame, q, source, summary, stats, path, failures) -> No
     run_seconds = sum(s.run_seconds for s in stats)
     main = stats[-1]
     lines = [
-        f"robot            {robot.name} ({robot.dof} dof: {', '.join(robot.joint_names)})",
+        f"robot            {_shown(robot.name)} ({robot.dof} dof: "
+        f"{', '.join(map(_shown, robot.joint_names))})",
         f"frame            {frame}, reference {args.reference}, "
         f"representation {args.representation}",
         f"configurations   {_source_line(args, robot, q, source)}",
@@ -1387,7 +1388,7 @@ def cmd_jacobian(args: argparse.Namespace) -> int:
         print(json.dumps(_jacobian_record(J, robot, frame, q, args, kind), indent=1))
     elif args.format == "csv":
         rows = _row_labels(args.analytical)
-        print(",".join(["row", *robot.joint_names]))
+        sys.stdout.write(jk.batch.csv_record(["row", *robot.joint_names]))
         for label, row in zip(rows, J, strict=True):
             print(",".join([label, *(repr(float(x)) for x in row)]))
     else:
@@ -1464,13 +1465,20 @@ def _jacobian_header(robot, frame, q, reference, representation, point) -> list[
     )
     units = ["rad" if k == "revolute" else "m" for k in robot.joint_kinds]
     q_text = ", ".join(
-        f"{n}={v:g} {u}" for n, v, u in zip(robot.joint_names, q, units, strict=True)
+        f"{_shown(n)}={v:g} {u}" for n, v, u in zip(robot.joint_names, q, units, strict=True)
     )
     return [
-        f"robot  {robot.name} ({robot.dof} joints), frame {frame}{tip}",
+        f"robot  {_shown(robot.name)} ({robot.dof} joints), frame {_shown(frame)}{tip}",
         f"q      {q_text}",
         f"J      {what}",
     ]
+
+
+def _shown(name: str) -> str:
+    """A name as printed on the terminal: itself when every character prints, else its Python
+    repr (a newline or an escape sequence in a model file's name cannot forge a line or move
+    the cursor)."""
+    return name if name.isprintable() else repr(name)
 
 
 def format_jacobian(
@@ -1490,7 +1498,8 @@ def format_jacobian(
     units = [linear] * 3 + [angular] * 3
     labels = [f"{r} [{u}]" for r, u in zip(rows, units, strict=True)]
     cells = [[_number(x, digits) for x in row] for row in J]
-    width = max(max(len(n) for n in robot.joint_names), max(len(c) for r in cells for c in r))
+    names = [_shown(n) for n in robot.joint_names]
+    width = max(max(map(len, names)), max(len(c) for r in cells for c in r))
     lw = max(len(s) for s in labels)
     lines = _jacobian_header(robot, frame, q, reference, representation, point)
     if representation is None:
@@ -1499,7 +1508,7 @@ def format_jacobian(
         per = "derivatives: a column is per rad (revolute joint) or per m (prismatic)"
     lines.append(f"rows   {' '.join(rows)} ({per})")
     lines.append("")
-    lines.append(" " * lw + "  " + " ".join(f"{n:>{width}}" for n in robot.joint_names))
+    lines.append(" " * lw + "  " + " ".join(f"{n:>{width}}" for n in names))
     for label, row in zip(labels, cells, strict=True):
         lines.append(f"{label:<{lw}}  " + " ".join(f"{c:>{width}}" for c in row))
     return "\n".join(lines)

@@ -233,3 +233,27 @@ def test_mistyped_robot_names_get_suggestions(capsys):
         assert "no such" not in err and "'jaxkin robots'" in err
     assert_flag_advice(capsys, "velocities", "mjcf/nosuch", "--n", "3",
                        match="unknown MJCF robot 'mjcf/nosuch'")  # fmt: skip
+
+
+def test_jacobian_csv_and_text_output_escape_names(capsys, in_tmp):
+    """Joint and robot names with commas, quotes and line breaks (legal in a URDF as character
+    references) neither break the Jacobian's CSV header nor forge lines of the text output."""
+    hostile = (
+        TINY_URDF.replace('name="tiny_arm"', 'name="evil&#10;robot  fake 0 joints"')
+        .replace('"shoulder"', '"sh,oulder"')
+        .replace('"elbow"', '"el&#10;1,2,3&#10;bow"')
+        .replace('"slide"', '"sl&quot;ide"')
+    )
+    (in_tmp / "arm.urdf").write_text(hostile)
+    robot = jk.load_urdf(in_tmp / "arm.urdf")
+    code, out, _ = run(capsys, "jacobian", "arm.urdf", "--q", "0.1", "0.2", "0.05",
+                       "--format", "csv")  # fmt: skip
+    assert code == 0
+    records = [fields for _, fields in jk.batch.csv_records(io.StringIO(out, newline=""))]
+    assert records[0] == ["row", *robot.joint_names]
+    assert len(records) == 7 and all(len(r) == 1 + robot.dof for r in records)
+    code, out, _ = run(capsys, "jacobian", "arm.urdf", "--q", "0.1", "0.2", "0.05")
+    assert code == 0
+    assert not any(line.startswith("1,2,3") or line.startswith("robot  fake")
+                   for line in out.splitlines())  # fmt: skip
+    assert repr("el\n1,2,3\nbow") in out
