@@ -43,6 +43,47 @@ def test_install_cell_comes_first_and_nothing_is_downloaded():
             assert word not in text.lower(), f"{path.name}: {word}"
 
 
+def _run_install_cell(monkeypatch, cwd: pathlib.Path, installed: bool) -> list[list[str]]:
+    """Run the install cell in ``cwd`` as in a kernel where jaxkin is (not) importable; the pip
+    commands it would run, recorded instead of run."""
+    import importlib.util as util
+    import subprocess
+
+    real_find_spec = util.find_spec
+    commands: list[list[str]] = []
+
+    def find_spec(name, *args):
+        return real_find_spec(name, *args) if installed or name != "jaxkin" else None
+
+    monkeypatch.setattr(util, "find_spec", find_spec)
+    monkeypatch.setattr(subprocess, "run", lambda cmd, **kw: commands.append(cmd))
+    monkeypatch.chdir(cwd)
+    exec(compile(build.INSTALL_CELL, "install cell", "exec"), {})
+    return commands
+
+
+def test_install_cell_installs_from_the_checkout_or_a_wheel_never_by_name(monkeypatch, tmp_path):
+    # where jaxkin imports: nothing
+    assert _run_install_cell(monkeypatch, tmp_path, installed=True) == []
+    # a fresh machine with the notebook alone: no checkout, no wheel, so it says what it needs
+    # (installing "jaxkin" by name from the registry would get someone else's package)
+    with pytest.raises(RuntimeError, match=r"python3 -m build --wheel.*jaxkin-\*\.whl"):
+        _run_install_cell(monkeypatch, tmp_path, installed=False)
+    # the wheel the user put beside the notebook
+    wheel = tmp_path / "jaxkin-0.1.0-py3-none-any.whl"
+    wheel.write_bytes(b"")
+    (cmd,) = _run_install_cell(monkeypatch, tmp_path, installed=False)
+    assert cmd[-1] == f"jaxkin[notebooks] @ {wheel.as_uri()}", cmd
+    # a checkout, found from a folder below it (not only from notebooks/), past another project
+    checkout = tmp_path / "checkout"
+    deep = checkout / "other" / "notebooks"
+    deep.mkdir(parents=True)
+    (checkout / "pyproject.toml").write_text('[project]\nname = "jaxkin"\n')
+    (checkout / "other" / "pyproject.toml").write_text('[project]\nname = "other"\n')
+    (cmd,) = _run_install_cell(monkeypatch, deep, installed=False)
+    assert cmd[-1] == f"jaxkin[notebooks] @ {checkout.as_uri()}", cmd
+
+
 @pytest.mark.parametrize("path", SOURCES, ids=lambda p: p.stem)
 def test_notebook_matches_its_source_runs_and_holds_its_outputs(path):
     committed = nbformat.read(path.with_suffix(".ipynb"), as_version=4)
