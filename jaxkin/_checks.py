@@ -243,22 +243,31 @@ def check_q(
 
 def check_rotations(robot: Robot, q: Any, what: str, fn: str) -> None:
     """Eagerly: raise when a free or ball joint's quaternion (or a planar joint's (cos, sin)) in
-    the configuration ``q`` is zero or not finite. A traced ``q`` is not checked (the kernels
-    give NaN there)."""
+    the configuration ``q`` is zero or not finite, or so small that all its entries are below
+    the computation dtype's smallest normal number (the kernels flush such subnormals to zero).
+    Any other size is normalised exactly by the kernels. A traced ``q`` is not checked (the
+    kernels give NaN there)."""
     if is_traced(q):
         return
+    tiny = np.finfo(result_dtype(robot, q)).tiny
     a = np.asarray(q, dtype=np.float64)
     for j in robot.multi_dof_joints:
         kind, qi = robot.kinds[j], robot.q_index[j]
         part = {"free": (3, 7), "ball": (0, 4), "planar": (2, 4)}[kind]
         r = a[qi + part[0] : qi + part[1]]
-        if not np.all(np.isfinite(r)) or not np.any(r != 0.0):
+        if not np.all(np.isfinite(r)) or not np.any(np.abs(r) >= tiny):
             name = robot.joint_names[qi].rsplit(".", 1)[0]
             entries = list(robot.joint_names[qi + part[0] : qi + part[1]])
             what_r = "(cos, sin) pair" if kind == "planar" else "quaternion (qw, qx, qy, qz)"
+            if not np.all(np.isfinite(r)):
+                why = "not finite"
+            elif np.any(r != 0.0):
+                why = f"too small to normalise (every entry below {tiny:.3g})"
+            else:
+                why = "zero"
             raise JaxkinError(
                 f"{fn}: the {what_r} of {kind} joint {name!r} in {what} ({entries} = "
-                f"{r.tolist()}) is {'zero' if np.all(np.isfinite(r)) else 'not finite'}, so it "
+                f"{r.tolist()}) is {why}, so it "
                 "is no rotation. Use a unit one (the identity is "
                 f"{'(1, 0)' if kind == 'planar' else '(1, 0, 0, 0)'}; jk.neutral(robot) gives a "
                 "valid configuration)."
@@ -321,6 +330,18 @@ def check_vector(x: Any, n: int, what: str, fn: str, meaning: str, hint: str = "
     if tuple(x.shape) != (n,):
         raise ShapeError(
             f"{fn}: {what} must have shape ({n},) ({meaning}), got {tuple(x.shape)}.{hint}"
+        )
+    return x
+
+
+def check_scalar(x: Any, what: str, fn: str, meaning: str, hint: str = "") -> Any:
+    """A real number of shape () (still host data or a JAX array, as given)."""
+    x = _as_array(x, what, fn, f"one number ({meaning})")
+    _numeric(x, what, fn)
+    if tuple(x.shape) != ():
+        raise ShapeError(
+            f"{fn}: {what} must be one number, shape () ({meaning}), got shape "
+            f"{tuple(x.shape)}.{hint}"
         )
     return x
 

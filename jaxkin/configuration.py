@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_q, check_robot, check_v, result_dtype
+from ._checks import check_q, check_robot, check_scalar, check_v, result_dtype
 from ._jit import eager
 from .build import resolve_dtype
 from .model import COORDINATES, JOINT_SIZES, Robot
@@ -89,6 +89,9 @@ def _quat_mul(a, b):
 
 
 def _unit(x):
+    """``x`` / ``|x|``, scaled by its largest magnitude first so that no square overflows or
+    underflows (NaN for ``x = 0``)."""
+    x = x / jnp.max(jnp.abs(x))
     return x * jax.lax.rsqrt(jnp.sum(x * x))
 
 
@@ -276,7 +279,7 @@ def integrate_kernel(robot: Robot, q: jax.Array, v: jax.Array, dt: Any = 1.0) ->
 # ----------------------------------------------------------------------------- public
 def integrate(robot: Robot, q: Any, v: Any, dt: Any = 1.0) -> jax.Array:
     """The configuration reached from ``q`` (nq,) by moving with velocity ``v`` (nv,) for
-    ``dt``; shape (nq,).
+    time ``dt`` (one number; for several, ``jax.vmap`` over it); shape (nq,).
 
     Each joint follows the exponential map (module doc): ``M(q') = M(q) exp(v dt)``, the
     velocity expressed in the child frame (Pinocchio's ``integrate``); revolute and prismatic
@@ -299,6 +302,13 @@ def integrate(robot: Robot, q: Any, v: Any, dt: Any = 1.0) -> jax.Array:
     hint = "jax.vmap(lambda q, v: jk.integrate(robot, q, v))(qs, vs)"
     q = check_q(robot, q, fn=fn, batch_hint=hint)
     v = check_v(robot, v, what="v", fn=fn, batch_hint=hint)
+    dt = check_scalar(
+        dt,
+        "dt",
+        fn,
+        "the time to move for",
+        " For several times use jax.vmap(lambda dt: jk.integrate(robot, q, v, dt))(dts).",
+    )
     return eager(_integrate, robot, (), q, v, jnp.asarray(dt, result_dtype(robot, q, v)))
 
 

@@ -32,8 +32,9 @@ Two solvers, both one jitted ``lax.while_loop`` that stops as soon as the target
 
 Outcomes are returned as codes (:class:`RESULTS`), not raised from inside ``jit``; with
 ``throw=True`` (the default, as in diffrax) :func:`solve_ik` raises :class:`IKError` after the
-solve when any target failed (under an outer ``jit``/``vmap``: a runtime error carrying the
-same message). ``throw=False`` returns the codes for you to inspect.
+solve when any target failed, carrying every target's solution (``except jk.IKError as e:
+e.solution``: one failed target does not lose the batch); under an outer ``jit``/``vmap`` a
+runtime error carrying the same message. ``throw=False`` returns the codes for you to inspect.
 """
 
 from __future__ import annotations
@@ -95,7 +96,20 @@ class RESULTS(enum.IntEnum):
 
 
 class IKError(JaxkinError):
-    """Raised by :func:`solve_ik` with ``throw=True`` when a target was not reached."""
+    """Raised by :func:`solve_ik` with ``throw=True`` when a target was not reached.
+
+    ``solution``: the whole :class:`IKSolution` of the call (every target's, the reached ones
+    included; ``solution.converged`` says which), so that one failed target does not lose the
+    batch: ``except jk.IKError as e: sol = e.solution``. None when raised from inside an outer
+    ``jit``/``vmap`` (no concrete solution exists there: pass ``throw=False``).
+    """
+
+    def __init__(self, message: str, solution: Any = None) -> None:
+        super().__init__(message)
+        self.solution = solution
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.solution))
 
 
 class IKSolution(NamedTuple):
@@ -745,13 +759,15 @@ def solve_ik(
       damping: initial LM damping ``lambda`` (m^2, adapted at every step).
       patience: a start is abandoned (``stalled``) after this many steps without a relative
         decrease of ``|e|^2`` of 1e-3 (LM) or 1e-4 (optax).
-      lanes: LM only: the number of parallel workers for a batch (default: N up to 64, then
-        N / 8, at least 64). Each runs one start at a time and then takes the next piece of
-        work, so a few hard targets do not keep the whole batch iterating; at the end the
-        remaining starts of the last targets run side by side. The answer does not depend on
-        it (up to rounding): the first converging start in the order of the starts wins.
-      throw: raise :class:`IKError` if any target did not converge (default); ``False`` returns
-        the :class:`RESULTS` codes in ``result`` instead.
+      lanes: LM only: the number of parallel workers for a batch, an integer >= 1 (default: N
+        up to 64, then N / 8, at least 64). Each runs one start at a time and then takes the
+        next piece of work, so a few hard targets do not keep the whole batch iterating; at the
+        end the remaining starts of the last targets run side by side. The answer does not
+        depend on it (up to rounding): the first converging start in the order of the starts
+        wins.
+      throw: raise :class:`IKError` if any target did not converge (default; the error's
+        ``solution`` holds the whole :class:`IKSolution`); ``False`` returns the
+        :class:`RESULTS` codes in ``result`` instead.
 
     Returns:
       :class:`IKSolution` (fields with a leading N axis for a batch). ``q`` always lies within
@@ -763,7 +779,7 @@ def solve_ik(
     at the solution.
     """
     fn = "jk.solve_ik"
-    _check_settings(fn, method, max_steps, num_seeds, patience)
+    _check_settings(fn, method, max_steps, num_seeds, patience, lanes)
     check_robot(robot, fn)
     refuse_multi_dof(robot, fn, "steps q in a vector space (q + dq) and clips it to box limits")
     f = robot.frame_index(frame)
@@ -801,14 +817,15 @@ def solve_ik(
     return sol
 
 
-def _check_settings(fn: str, method: str, max_steps, num_seeds, patience) -> None:
-    """Refuse an unknown method and counts that are not integers >= 1."""
+def _check_settings(fn: str, method: str, max_steps, num_seeds, patience, lanes=None) -> None:
+    """Refuse an unknown method and counts that are not integers >= 1 (booleans included)."""
     if method not in METHODS:
         raise JaxkinError(f"{fn}: method must be one of {METHODS}, got {method!r}.")
     for name, val, lo in (
         ("max_steps", max_steps, 1),
         ("num_seeds", 1 if num_seeds is None else num_seeds, 1),
         ("patience", patience, 1),
+        ("lanes", 1 if lanes is None else lanes, 1),
     ):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
             raise JaxkinError(f"{fn}: {name} must be an integer >= {lo}, got {val!r}.")
@@ -877,7 +894,9 @@ def _lanes(n: int) -> int:
     return n if n <= 64 else max(64, -(-n // 8))
 
 
-def _failure_message(result: np.ndarray, residual: np.ndarray) -> str | None:
+def _failure_message(result: np.ndarray, residual: np.ndarray, kept: bool) -> str | None:
+    """The IKError message, or None when every target converged; ``kept``: the error carries
+    the solution (an eager call)."""
     result = np.atleast_1d(np.asarray(result))
     residual = np.atleast_1d(np.asarray(residual))
     failed = np.flatnonzero(result != RESULTS.converged)
@@ -888,19 +907,26 @@ def _failure_message(result: np.ndarray, residual: np.ndarray) -> str | None:
     return (
         f"jk.solve_ik: {failed.size} of {result.size} target(s) not reached ({counts}); first: "
         f"target {i}, residual {float(residual[i]):.3g}: {RESULTS.message(int(result[i]))}. "
-        "Pass throw=False to get the result codes (sol.result, jk.ik.RESULTS) instead."
+        + (
+            "Every target's solution is kept on the error (sol.converged says which were "
+            "reached): except jk.IKError as e: sol = e.solution; or pass throw=False to get it "
+            "returned, with the result codes (sol.result, jk.ik.RESULTS)."
+            if kept
+            else "Pass throw=False to get the solutions and the result codes (sol.result, "
+            "jk.ik.RESULTS) instead."
+        )
     )
 
 
 def _raise_if_failed(sol: IKSolution) -> None:
     if not is_traced((sol.result, sol.residual)):
-        msg = _failure_message(np.asarray(sol.result), np.asarray(sol.residual))
+        msg = _failure_message(np.asarray(sol.result), np.asarray(sol.residual), kept=True)
         if msg:
-            raise IKError(msg)
+            raise IKError(msg, solution=sol)
         return
 
     def check(result, residual):
-        msg = _failure_message(result, residual)
+        msg = _failure_message(result, residual, kept=False)
         if msg:
             raise IKError(msg)
 

@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import ModelError, NoDefaultFrameError
+from .errors import ModelError, NoDefaultFrameError, ShapeError
 
 __all__ = [
     "COORDINATES",
@@ -81,6 +81,11 @@ def _as_leaf(x: Any) -> Any:
     return jnp.array(x) if isinstance(x, (np.ndarray, list, tuple, float, int)) else x
 
 
+def _host(x: Any) -> Any:
+    """A JAX array as numpy (for pickling); other values unchanged."""
+    return np.asarray(x) if isinstance(x, jax.Array) else x
+
+
 @jax.tree_util.register_pytree_node_class
 class Params(Mapping):
     """The per-joint parameter arrays of a robot, read-only (``robot.params["a"]``).
@@ -109,6 +114,10 @@ class Params(Mapping):
 
     def __repr__(self) -> str:
         return f"Params({self._items!r})"
+
+    def __reduce__(self):
+        """Pickle, copy and deepcopy by value (the arrays as numpy; a new read-only mapping)."""
+        return (Params, ({k: np.asarray(v) for k, v in self._items.items()},))
 
     def tree_flatten(self):
         return tuple(self._items.values()), tuple(self._items)
@@ -190,6 +199,17 @@ class Robot:
         for k, v in zip(_STATIC, aux, strict=True):
             object.__setattr__(obj, k, v)
         return obj
+
+    # ------------------------------------------------------------------ pickling
+    def __reduce__(self):
+        """Pickle, ``copy.copy`` and ``copy.deepcopy`` by value: the constructor with every
+        attribute (arrays as numpy, so that a robot pickled next to a GPU loads anywhere). The
+        copy is an equal, equally immutable robot; cached hashes are not carried (Python's
+        string hashes differ between processes). A traced robot cannot be pickled."""
+        if not self.is_concrete:
+            raise TypeError("a traced robot (inside jit/vmap/grad) cannot be pickled or copied.")
+        fields = [getattr(self, f.name) for f in dataclasses.fields(self)]
+        return (Robot, tuple(x if isinstance(x, Params) else _host(x) for x in fields))
 
     # ------------------------------------------------------------------ value semantics
     def _value_key(self) -> tuple | None:
@@ -425,8 +445,32 @@ class Robot:
     def replace(self, **changes: Any) -> Robot:
         """An independent robot with some attributes replaced (e.g. perturbed parameters for
         calibration: ``robot.replace(params={**robot.params, "d": d_new})``); ``self`` is
-        unchanged."""
-        return dataclasses.replace(self, **changes)
+        unchanged.
+
+        Each replaced array must have the shape of the one it replaces (``axis`` (n, 3),
+        ``offset``/``multiplier`` (n,), ``lower``/``upper`` (nq,), ``base``/``tool`` (4, 4),
+        ``params`` the same names with their shapes; n joints, nq coordinates, after the change;
+        a stack of robots keeps its leading axes); otherwise :class:`~jaxkin.ShapeError` names
+        the attribute, the shape wanted and the shape given (every array is checked when a
+        structural attribute such as ``kinds`` changes). Integer and boolean arrays take the
+        robot's dtype. An unknown attribute is a :class:`~jaxkin.ModelError`.
+        """
+        unknown = sorted(set(changes) - set(_LEAVES) - set(_STATIC))
+        if unknown:
+            raise ModelError(
+                f"robot.replace: Robot has no attribute {unknown[0]!r}; the attributes that can be "
+                f"replaced are {[*_LEAVES, *_STATIC]}."
+            )
+        new = dataclasses.replace(self, **changes)
+        batch = tuple(np.shape(self.base))[:-2]
+        structure = any(k in _STATIC for k in changes)  # then every array must fit the new one
+        for name in _LEAVES:
+            if name == "params" and (structure or name in changes):
+                _check_params(new, batch)
+            elif structure or name in changes:
+                value = _checked_leaf(name, getattr(new, name), _leaf_shape(new, name), batch, new)
+                object.__setattr__(new, name, value)
+        return new
 
     def astype(self, dtype: Any) -> Robot:
         """A copy with every float leaf cast to ``dtype`` (float32 or float64)."""
@@ -461,6 +505,67 @@ class Robot:
         from .build import from_joints
 
         return from_joints(joints, root, **kwargs)
+
+
+_PARAM_SHAPES = {
+    "dh_standard": {"a": (), "alpha": (), "d": (), "theta": ()},
+    "dh_modified": {"a": (), "alpha": (), "d": (), "theta": ()},
+    "placement": {"xyz": (3,), "rpy": (3,)},
+}
+"""Per-joint shape of each parameter array of a parameterisation (after the joint axis)."""
+
+
+def _leaf_shape(robot: Robot, name: str) -> tuple[int, ...]:
+    """The shape of the array attribute ``name`` (not ``params``) of an unstacked ``robot``."""
+    n = robot.n_joints
+    return {
+        "axis": (n, 3),
+        "offset": (n,),
+        "multiplier": (n,),
+        "lower": (robot.nq,),
+        "upper": (robot.nq,),
+        "base": (4, 4),
+        "tool": (4, 4),
+    }[name]
+
+
+def _checked_leaf(name: str, x: Any, shape: tuple, batch: tuple, robot: Robot) -> Any:
+    """``x`` (already an array or tracer) if its shape is ``batch + shape`` and it holds real
+    numbers (integer and boolean ones cast to the robot's dtype); a ShapeError otherwise."""
+    got = tuple(np.shape(x)) if hasattr(x, "shape") else None
+    kind = np.dtype(x.dtype).kind if hasattr(x, "dtype") else "O"
+    wanted = batch + shape
+    sizes = f"n = {robot.n_joints} joints, nq = {robot.nq} coordinates"
+    stack = f" (a stack of {batch} robots)" if batch else ""
+    if kind not in "fiub":
+        raise ShapeError(
+            f"robot.replace: {name} must be an array of real numbers of shape {wanted}{stack}, "
+            f"got {x!r:.80}."
+        )
+    if got != wanted:
+        raise ShapeError(
+            f"robot.replace: {name} must have shape {wanted} for robot {robot.name!r}{stack} "
+            f"({sizes}), got shape {got}."
+        )
+    return x if kind == "f" else jnp.asarray(x, robot.base.dtype)
+
+
+def _check_params(robot: Robot, batch: tuple) -> None:
+    """Check (and cast, as :func:`_checked_leaf`) the ``params`` of a replaced ``robot``."""
+    shapes = _PARAM_SHAPES.get(robot.parameterisation)
+    if shapes is None:
+        return  # an unknown parameterisation is refused where it is used
+    if set(robot.params) != set(shapes):
+        raise ModelError(
+            f"robot.replace: params of a {robot.parameterisation!r} robot must have the arrays "
+            f"{sorted(shapes)}, got {sorted(robot.params)}. Change some with "
+            'robot.replace(params={**robot.params, "name": new_array}).'
+        )
+    items = {
+        k: _checked_leaf(f"params[{k!r}]", v, (robot.n_joints, *shapes[k]), batch, robot)
+        for k, v in robot.params.items()
+    }
+    object.__setattr__(robot, "params", Params(items))
 
 
 _LEAVES = tuple(f.name for f in dataclasses.fields(Robot) if f.metadata["leaf"])

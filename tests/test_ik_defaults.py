@@ -11,6 +11,8 @@ tolerance. Every solution is checked independently of the solver: numpy on ``jk.
 
 from __future__ import annotations
 
+import pickle
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -93,6 +95,33 @@ def test_default_call_reaches_random_reachable_targets(name):
     # a bounded budget, restarts included
     assert np.all(sol.seed < jk.ik.DEFAULT_NUM_SEEDS) and np.all(sol.seed >= 0)
     assert np.all(sol.steps <= jk.ik.DEFAULT_NUM_SEEDS * 30)
+
+
+def test_an_ik_error_keeps_the_batch():
+    """With throw=True one unreachable target of 200 raised an IKError that carried nothing:
+    the other solutions were lost. The error now keeps the whole IKSolution. (The batch of the
+    niryo_one case above: its solver is already compiled, the call costs milliseconds.)"""
+    robot = _load("niryo_one")
+    _, T = _targets(robot, N_TARGETS, 1)
+    T[7, :3, 3] = [5.0, 0.0, 0.0]  # beyond the arm's reach
+    q0 = _mid_limits(robot)
+    with pytest.raises(jk.IKError, match=r"except jk.IKError as e: sol = e.solution") as info:
+        jk.solve_ik(robot, T, q0)
+    error = info.value
+    sol = jax.tree_util.tree_map(np.asarray, error.solution)
+    assert isinstance(error.solution, jk.IKSolution) and sol.q.shape == (N_TARGETS, 6)
+    assert int(sol.result[7]) == RESULTS.unreachable and not sol.converged[7]
+    ok = _reached(robot, sol.q, T)
+    np.testing.assert_array_equal(sol.converged, ok)
+    assert np.sum(ok) >= N_TARGETS - 2  # 199 reachable targets, at most one failure (above)
+    quiet = jk.solve_ik(robot, T, q0, throw=False)  # the same answer as throw=False
+    np.testing.assert_array_equal(np.asarray(quiet.q), sol.q)
+    # an ordinary exception: args, pickling (solution included)
+    assert isinstance(error, ValueError) and error.args == (str(error),)
+    again = pickle.loads(pickle.dumps(error))
+    assert type(again) is jk.IKError and str(again) == str(error)
+    np.testing.assert_array_equal(np.asarray(again.solution.q), sol.q)
+    assert jk.IKError("plain").solution is None
 
 
 def test_answers_do_not_depend_on_the_lanes():
