@@ -22,7 +22,9 @@ from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot
 from .rigid import quaternion_matrix
 
 __all__ = [
+    "TOOL_FLANGE",
     "MimicError",
+    "end_frames",
     "from_dh",
     "from_joints",
     "resolve_dtype",
@@ -696,6 +698,47 @@ def resolve_mimics(
             M, O = m * M, m * O + o  # value_i = m * value_next + o
             resolved[i] = (driver, M, O)
     return resolved
+
+
+TOOL_FLANGE = "tool0"
+"""ROS-Industrial's tool flange frame (REP 199: "tool0", the robot's mounting flange, with no
+tool attached). Where the fixed frames hanging off the last moving link branch, the default
+frame follows the branch to a link of this name (see :func:`end_frames`)."""
+
+
+def end_frames(root: str, joints: Sequence[tuple[str, str, bool]]) -> tuple[str, ...]:
+    """The end frame of each branch of the moving joints of a tree: the default frame rule of
+    the file loaders (``jk.load_urdf``, ``jk.load_mjcf``).
+
+    ``joints`` are ``(parent, child, moves)`` triples, parents before children, below ``root``.
+    For each moving joint with no moving joint below it (the end of a branch), fixed joints are
+    followed down from its child link while the link has exactly one child joint; where the
+    fixed frames branch and one of the children is :data:`TOOL_FLANGE` (``"tool0"``), the walk
+    goes on into it. The link where the walk stops is the branch's end frame. One end frame:
+    the robot's default frame; several: no default (the candidates); none (no moving joint):
+    ``()``. Iterative and linear.
+    """
+    children: dict[str, list[str]] = {root: []}
+    for parent, child, _ in joints:
+        children.setdefault(parent, []).append(child)
+        children.setdefault(child, [])
+    moving_below = dict.fromkeys(children, False)  # a moving joint in the link's subtree
+    for parent, child, moves in reversed(joints):  # children before parents
+        if moves or moving_below[child]:
+            moving_below[parent] = True
+
+    def end_frame(link: str) -> str:
+        while True:  # fixed joints only: no moving joint is below
+            below = children[link]
+            if len(below) == 1:
+                link = below[0]
+            elif TOOL_FLANGE in below:
+                link = TOOL_FLANGE
+            else:
+                return link
+
+    ends = [child for _, child, moves in joints if moves and not moving_below[child]]
+    return tuple(end_frame(child) for child in ends)
 
 
 def _limit(value: Any, where: str) -> float:

@@ -26,9 +26,15 @@ What is read, and how
   float64 with an overflow- and underflow-safe norm, so non-unit axes (``0 0 2``) and CAD residue
   (``0 1 6.12323e-17``) are taken as written, scaled to unit length. A zero or non-finite axis on
   a moving joint is an error; a fixed joint's axis is ignored (it must still be numbers).
+  Several ``<axis>`` elements with the same ``xyz`` (found in real files; urdfdom takes the
+  first) are read as one, with a :class:`URDFWarning`; several that differ are refused, naming
+  both lines.
 * ``<limit lower upper>``: required on revolute and prismatic joints (as urdfdom requires), lower
-  and upper default to 0 there; ignored on continuous joints (unbounded). ``effort`` and
-  ``velocity`` are not read.
+  and upper default to 0 there. ``lower > upper`` (``lower="1" upper="-1"``, how some simulators
+  write "no limits"; urdfdom loads it) makes the joint unbounded, with a :class:`URDFWarning`
+  naming the joint and line (one warning per file). On continuous, fixed, floating and planar
+  joints ``<limit>`` is ignored (continuous joints are unbounded), though its values must still
+  be numbers. ``effort`` and ``velocity`` are not read.
 * ``<mimic joint multiplier offset>`` (defaults 1 and 0): ``value = multiplier * value_leader +
   offset``. Only independent joints are entries of ``q``; a mimic joint's Jacobian column folds
   into its leader's. A ``<mimic>`` on a fixed joint has no effect and is ignored (as urdfdom
@@ -53,10 +59,14 @@ construction:
 * ``tip=`` given: the tip.
 * The moving joints form one chain (each lies on the path from the root to the last one): the
   end of that chain. From the child link of the last moving joint, fixed joints are followed
-  down while the link has exactly one child joint; the link where that stops is the default.
-  So a single ``tool0``/``ee_link``/TCP frame fixed to the flange is taken, and where the
-  flange carries several fixed frames (UR files: ``ee_link`` and ``tool0`` both on
-  ``wrist_3_link``) the flange link itself is (pass ``frame=``/``tip=`` for one of them).
+  down while the link has exactly one child joint, and where the fixed frames branch, into the
+  child named ``tool0`` if there is one (ROS-Industrial's tool flange, REP 199); the link where
+  that stops is the default. So a single ``tool0``/``ee_link``/TCP frame fixed to the flange is
+  taken; where the flange carries several fixed frames one of which is ``tool0`` (UR files:
+  ``ee_link`` and ``tool0`` both on ``wrist_3_link``), ``tool0`` is; and where it carries
+  several and none is ``tool0``, the flange link itself is (pass ``frame=``/``tip=`` for one of
+  them). ``jk.robots.load("erd/...")`` follows the same rule (see
+  :mod:`jaxkin.robots.example_robot_data` for the arms whose tool frame it cannot give).
 * The moving joints branch (an arm with gripper fingers, a humanoid, a legged robot): there is
   no default. Loading succeeds (``fk_all`` and every function given ``frame=`` work), but a
   function asked for the default frame raises :class:`jaxkin.model.NoDefaultFrameError` (a
@@ -70,12 +80,20 @@ The XML is parsed by expat with handlers that refuse any document type declarati
 entity or notation declaration before any of it is processed: no entity is ever expanded, no
 external entity, file or URL is ever resolved. Input is capped at ``max_bytes`` (default
 :data:`DEFAULT_MAX_BYTES`) before parsing. Mesh references are never opened, ``package://`` URLs
-never resolved, xacro never run by the parser (a file with ``xacro:`` elements is refused);
-:func:`load_urdf` given a ``.xacro`` path (or ``xacro_args``) expands it with the ``xacro``
-package first (the ``xacro`` extra), which evaluates the file's expressions and reads the files it
-includes: the parser's guarantees then hold for the expanded URDF. Every tree
-algorithm is iterative and linear (no recursion limit: a 3,000-joint chain, or a 3,000-joint
-chain of mimic joints, loads in about a second).
+never resolved, xacro never run by the parser (a file with ``xacro:`` elements is refused).
+
+A xacro file is a program, not data: xacro evaluates its ``${...}`` expressions as Python, with
+no sandbox (a file can run any code on this machine), and reads the files it includes.
+:func:`load_urdf` given a ``.xacro`` path (or ``xacro_args``) therefore refuses it unless called
+with ``trust=True`` (only for files you trust), then expands it with the ``xacro`` package (the
+``xacro`` extra) within caps: only regular files are read (a FIFO, device or directory is
+refused by name, before reading), each at most ``max_bytes``, as is each expression's value; the
+expansion stops after :data:`XACRO_TIME_LIMIT` seconds or :data:`XACRO_MAX_ELEMENTS` elements
+(a macro doubling itself level after level); the parser's guarantees then hold for the expanded
+URDF.
+
+Every tree algorithm is iterative and linear (no recursion limit: a 3,000-joint chain, or a
+3,000-joint chain of mimic joints, loads in about a second).
 
 Errors
 ------
@@ -87,16 +105,23 @@ it; the same facts are attributes of the exception.
 from __future__ import annotations
 
 import difflib
+import errno
 import math
 import os
 import re
+import stat
+import sys
+import threading
+import time
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from xml.parsers import expat
 
-from .build import MimicError, resolve_mimics
+from .build import MimicError, end_frames, resolve_mimics
 from .errors import ModelError
 from .model import Robot
 
@@ -108,6 +133,9 @@ __all__ = [
     "URDFLink",
     "URDFMimic",
     "URDFModel",
+    "URDFWarning",
+    "XACRO_MAX_ELEMENTS",
+    "XACRO_TIME_LIMIT",
     "load_urdf",
     "parse_urdf",
 ]
@@ -187,6 +215,36 @@ def _rebuild_error(problem: str, kwargs: dict[str, Any]) -> URDFError:
     return URDFError(problem, **kwargs)
 
 
+class URDFWarning(UserWarning):
+    """A URDF that urdfdom loads, written in a way jaxkin accepts and reads in one documented way:
+    a ``<limit>`` with lower above upper (taken as no limits), a repeated identical ``<axis>``
+    (used once). One warning per kind and file, naming the file, the joints and the lines."""
+
+
+_NOTES = {
+    "inverted_limits": (
+        '<limit> with lower above upper, which some exporters (simulators) write for "no '
+        'limits" and urdfdom loads: jaxkin takes the joint as unbounded (-inf, inf) (urdfdom and '
+        "Pinocchio keep the inverted numbers, which no value satisfies). Fix: write the real "
+        'limits with lower <= upper, or make a revolute joint type="continuous".'
+    ),
+    "duplicate_axis": (
+        "the joint has several identical <axis> elements; jaxkin uses one, as urdfdom takes "
+        "the first. Fix: delete the repeated <axis>."
+    ),
+}
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` that makes a warning issued by the caller of this function point at
+    the first frame outside jaxkin (the user's call)."""
+    package = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(package):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 def _show(value: str) -> str:
     text = value if len(value) <= _SHOW else value[:_SHOW] + "..."
     return repr(text)
@@ -217,7 +275,8 @@ class URDFJoint:
 
     ``xyz``/``rpy``: the origin in the parent link's frame; ``axis``: the unit axis in the joint
     frame (``(1, 0, 0)`` for fixed joints); ``lower``/``upper``: limits (infinite for continuous
-    joints, NaN for fixed ones).
+    joints and for a ``<limit>`` written with lower above upper, NaN for fixed, floating and
+    planar ones).
     """
 
     name: str
@@ -351,8 +410,9 @@ def _read_path(source: str | os.PathLike, max_bytes: int) -> tuple[bytes, str]:
             "this is a xacro file; jaxkin never runs xacro (it executes code and reads other "
             "files).",
             file=label,
-            fix=f"load it with jk.load_urdf({label!r}) (expands it with the xacro package: "
-            f"{_XACRO_EXTRA}), or expand it first: `xacro {label} > robot.urdf`.",
+            fix=f"if you trust it, load it with jk.load_urdf({label!r}, trust=True) (runs its "
+            f"code with the xacro package: {_XACRO_EXTRA}), or expand it first: "
+            f"`xacro {label} > robot.urdf`.",
         )
     data = _read_file(path, label, max_bytes)
     if len(data) > max_bytes:
@@ -373,7 +433,7 @@ def _read_file(path: Path, label: str, max_bytes: int) -> bytes:
             elif path.exists():
                 hint = "it is not a regular file."
             else:
-                hint = "no such file."
+                hint = _missing_hint(path)
             raise URDFError(
                 f"cannot read the URDF: {hint}",
                 file=label,
@@ -397,6 +457,21 @@ def _read_file(path: Path, label: str, max_bytes: int) -> bytes:
             file=label,
             fix="check the path, or pass the XML itself (a string starting with '<').",
         ) from None
+
+
+def _missing_hint(path: Path) -> str:
+    """Why ``path``, which does not resolve to an existing file, cannot be read."""
+    try:
+        os.stat(path)
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            return (
+                "it is a symbolic link loop (following its links comes back to a link already "
+                "followed, so it names no file)."
+            )
+    if path.is_symlink():
+        return f"it is a symbolic link to {_show(os.readlink(path))}, which does not exist."
+    return "no such file."
 
 
 def _parse_xml(data: bytes | str, label: str) -> _Element:
@@ -513,6 +588,21 @@ class _Context:
 
     def __init__(self, label: str) -> None:
         self.file = label
+        self.notes: dict[str, list[str]] = {}
+
+    def note(self, kind: str, where: str) -> None:
+        """Remember a tolerated oddity of ``kind`` (a key of ``_NOTES``) at ``where``."""
+        self.notes.setdefault(kind, []).append(where)
+
+    def warn_notes(self) -> None:
+        """One :class:`URDFWarning` per kind of tolerated oddity, naming the places."""
+        for kind, places in self.notes.items():
+            more = f" and {len(places) - 10} more" if len(places) > 10 else ""
+            warnings.warn(
+                f"{self.file}: {', '.join(places[:10])}{more}: {_NOTES[kind]}",
+                URDFWarning,
+                stacklevel=_user_stacklevel(),
+            )
 
     def error(self, problem: str, elem: _Element | None = None, **kw: Any) -> URDFError:
         line = kw.pop("line", elem.line if elem is not None else None)
@@ -700,7 +790,7 @@ def _joint_origin(ctx: _Context, elem: _Element, owner: str, name: str) -> tuple
 def _joint_axis(ctx: _Context, elem: _Element, owner: str, name: str, kind: str) -> tuple:
     """The unit axis of the joint's ``<axis>`` (default ``1 0 0``; ``1 0 0`` for fixed joints)."""
     axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
-    axis_el = ctx.single(elem, "axis", owner, required=False)
+    axis_el = _axis_element(ctx, elem, owner, name)
     if axis_el is not None:
         where = f"<axis> of joint {name!r}"
         v = ctx.vector3(axis_el, where, "xyz", (1.0, 0.0, 0.0))
@@ -710,9 +800,36 @@ def _joint_axis(ctx: _Context, elem: _Element, owner: str, name: str, kind: str)
     return axis
 
 
+def _axis_element(ctx: _Context, elem: _Element, owner: str, name: str) -> _Element | None:
+    """The joint's ``<axis>``, or None. Repeated ``<axis>`` elements with the same ``xyz``
+    (urdfdom takes the first) are accepted with one warning; differing ones are refused."""
+    found = [c for c in elem.children if c.tag == "axis"]
+    where = f"<axis> of joint {name!r}"
+    values = [ctx.vector3(c, where, "xyz", (1.0, 0.0, 0.0)) for c in found]
+    for c, v in zip(found[1:], values[1:], strict=True):
+        if v != values[0]:
+            first = found[0].attrib.get("xyz", "1 0 0 (no xyz)")
+            raise ctx.error(
+                f"{len(found)} <axis> elements that differ: xyz={first!r} on line "
+                f"{found[0].line} and xyz={c.attrib.get('xyz', '1 0 0 (no xyz)')!r} on line "
+                f"{c.line}; jaxkin does not guess which is meant (urdfdom silently takes the "
+                "first).",
+                c,
+                element=owner,
+                attribute="xyz",
+                value=c.attrib.get("xyz"),
+                fix="keep the right <axis> and delete the other.",
+            )
+    if len(found) > 1:
+        lines = ", ".join(str(c.line) for c in found)
+        ctx.note("duplicate_axis", f"joint {name!r} (<axis> on lines {lines})")
+    return found[0] if found else None
+
+
 def _joint_limits(ctx: _Context, elem: _Element, owner: str, name: str, kind: str):
     """``(lower, upper)`` of the joint: its ``<limit>`` (required on revolute and prismatic
-    joints), infinite for continuous joints, NaN for the others."""
+    joints; lower above upper means no limits, with a warning), infinite for continuous joints,
+    NaN for the others (whose ``<limit>``, if any, must hold numbers but is not used)."""
     lower, upper = math.nan, math.nan
     limit = ctx.single(elem, "limit", owner, required=False)
     if kind in ("revolute", "prismatic") and limit is None:
@@ -731,17 +848,11 @@ def _joint_limits(ctx: _Context, elem: _Element, owner: str, name: str, kind: st
         where = f"<limit> of joint {name!r}"
         lo = ctx.number(limit, where, "lower", 0.0)
         hi = ctx.number(limit, where, "upper", 0.0)
-        if lo > hi:
-            raise ctx.error(
-                f"lower limit {lo!r} is above upper limit {hi!r}.",
-                limit,
-                element=where,
-                attribute="lower",
-                value=limit.attrib.get("lower"),
-                fix="swap them, or fix the typo (lower <= upper).",
-            )
         if kind in ("revolute", "prismatic"):
             lower, upper = lo, hi
+            if lo > hi:  # some exporters' "no limits"; urdfdom loads it
+                ctx.note("inverted_limits", f"joint {name!r} (line {limit.line}: {lo!r} > {hi!r})")
+                lower, upper = -math.inf, math.inf
     if kind == "continuous":
         lower, upper = -math.inf, math.inf
     return lower, upper
@@ -935,9 +1046,12 @@ def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
 
     Raises:
       URDFError: for any invalid or refused input (see the module doc).
+
+    Warns:
+      URDFWarning: once per kind of tolerated oddity (lower above upper, a repeated identical
+        ``<axis>``), naming the joints and lines, after the file is found valid.
     """
-    if not isinstance(max_bytes, int) or isinstance(max_bytes, bool) or max_bytes <= 0:
-        raise ModelError(f"max_bytes must be a positive integer, got {max_bytes!r}.")
+    _check_max_bytes(max_bytes)
     data, label = _read_source(source, max_bytes)
     root = _parse_xml(data, label)
     ctx = _Context(label)
@@ -993,11 +1107,23 @@ def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
     robot_name = ctx.name(root, "<robot>")
     root_link = _topology(ctx, links, joints)
     _resolve_mimics(ctx, joints)
+    ctx.warn_notes()
     return URDFModel(robot_name, label, tuple(links), tuple(joints), root_link)
 
 
 # ---------------------------------------------------------------------------------- building
 def _select(
+    model: URDFModel, tip: str | None, base: str | None, ctx: _Context, floating: bool = False
+) -> tuple[str, list[URDFJoint]]:
+    """The root link and the joints (parents first) of the selected chain or subtree; a ``base``
+    below which the selection has no moving joint is refused (:func:`_refuse_motionless`)."""
+    start, joints = _select_joints(model, tip, base, ctx)
+    if base is not None and not floating:
+        _refuse_motionless(model, tip, base, joints, ctx)
+    return start, joints
+
+
+def _select_joints(
     model: URDFModel, tip: str | None, base: str | None, ctx: _Context
 ) -> tuple[str, list[URDFJoint]]:
     """The root link and the joints (parents first) of the selected chain or subtree."""
@@ -1027,6 +1153,49 @@ def _select(
         link = j.parent
     path.reverse()
     return start, path
+
+
+def _refuse_motionless(
+    model: URDFModel, tip: str | None, base: str, joints: list[URDFJoint], ctx: _Context
+) -> None:
+    """Refuse an explicit ``base`` whose selection (the subtree below it, or the chain to
+    ``tip``) has no moving joint while the file has some: a robot with nothing to move. A file
+    with no moving joint at all (dof 0 whole) loads with any base."""
+    if any(j.type != "fixed" for j in joints) or all(j.type == "fixed" for j in model.joints):
+        return
+    parent_joint = {j.child: j for j in model.joints}
+    if tip is None:
+        what = f"nothing moves below base {base!r} (a leaf, or only fixed joints below it)"
+        wanted = {j.parent for j in model.joints if j.type != "fixed"}  # links above a mover
+        for j in reversed(list(model.depth_first())):  # children before parents
+            if j.child in wanted:
+                wanted.add(j.parent)
+    else:
+        what = f"no joint between base {base!r} and tip {tip!r} moves"
+        on_path = [tip, *_ancestors(tip, parent_joint)]
+        wanted = {
+            parent_joint[link].parent
+            for link in on_path
+            if link in parent_joint and parent_joint[link].type != "fixed"
+        }
+    up = next((link for link in _ancestors(base, parent_joint) if link in wanted), None)
+    to = "down" if tip is None else f"to tip {tip!r}"
+    hint = f"base={up!r} (the nearest link above it with a moving joint {to}), " if up else ""
+    raise ctx.error(
+        f"{what}: the robot would have no degree of freedom.",
+        line=next(link.line for link in model.links if link.name == base),
+        element=f"<link name={base!r}>",
+        fix=f"choose a base above a moving joint, e.g. {hint}or leave base=None (the whole "
+        f"robot, from its root {model.root!r}); to read the pose of {base!r}, pass "
+        f"frame={base!r} to fk.",
+    )
+
+
+def _ancestors(link: str, parent_joint: Mapping[str, URDFJoint]) -> Iterator[str]:
+    """The links above ``link``, nearest first."""
+    while link in parent_joint:
+        link = parent_joint[link].parent
+        yield link
 
 
 def _refuse_unsupported(ctx: _Context, joints: list[URDFJoint]) -> None:
@@ -1060,6 +1229,7 @@ def load_urdf(
     name: str | None = None,
     xacro_args: Mapping[str, Any] | None = None,
     floating_base: bool = False,
+    trust: bool = False,
 ) -> Robot:
     """Load a URDF as a :class:`~jaxkin.Robot` (a placement robot; see the module doc).
 
@@ -1068,19 +1238,29 @@ def load_urdf(
       tip: optional link name: keep only the chain from ``base`` to ``tip`` (the default frame of
         ``fk``/``geometric_jacobian`` is then ``tip``).
       base: optional link name: the root of the model (default: the URDF's root link). Its frame
-        is the world frame of the result; joints above it are dropped.
+        is the world frame of the result; joints above it are dropped. A base below which
+        (or, with ``tip``, between which and ``tip``) no joint moves is refused, naming a base
+        that works, unless the file has no moving joint at all or ``floating_base=True``.
       max_bytes: size cap (default 16 MiB), checked before parsing.
       dtype: float32 or float64 (default: JAX's default float).
       name: the robot's name (default: the URDF's ``<robot name>``).
       xacro_args: ``name -> value`` of the file's ``<xacro:arg>`` (``xacro robot.urdf.xacro
         name:=value``). A path ending in ``.xacro`` (or any path given with ``xacro_args``) is
-        first expanded with the ``xacro`` package (``pip install 'jaxkin[xacro]'``).
+        first expanded with the ``xacro`` package (``pip install 'jaxkin[xacro]'``), and only
+        with ``trust=True``.
       floating_base: add a free joint ``"root_joint"`` above the root link (``base`` when
         given), moving it relative to a new base frame ``"universe"``, as Pinocchio's
         ``buildModelFromUrdf(path, pin.JointModelFreeFlyer())``: ``q`` starts with the 7
         entries ``root_joint.x`` ... ``root_joint.qz`` (position, then unit quaternion, scalar
         first) and the velocity with 6 (the root link's twist in its own axes); see
         :mod:`jaxkin.configuration`.
+      trust: ``True`` lets a xacro file be expanded, which runs code from the file: xacro
+        evaluates its ``${...}`` expressions as Python, with no sandbox, so a file can do
+        anything your user can (read, write, delete files). Only for files you trust; without
+        it a xacro file is refused (a plain URDF never runs anything, trusted or not). A trusted
+        expansion is still capped: it reads only regular files (a FIFO, device or directory is
+        refused) of at most ``max_bytes``, stops after :data:`XACRO_TIME_LIMIT` seconds or
+        :data:`XACRO_MAX_ELEMENTS` elements, and parses the result with the strict parser.
 
     Returns:
       A robot whose ``frame_names`` are the selected links (``base`` first, then depth-first,
@@ -1092,13 +1272,18 @@ def load_urdf(
     Raises:
       URDFError: invalid or refused file (a :class:`jaxkin.ModelError`), with file, line,
         element, attribute, value and a fix in the message.
+
+    Warns:
+      URDFWarning: a file urdfdom loads that jaxkin reads in one documented way (``<limit>``
+        with lower above upper: no limits; a repeated identical ``<axis>``); once per kind.
     """
+    _check_trust(trust)
     if xacro_args is not None or _is_xacro_path(source):
-        model = _parse_xacro(source, xacro_args or {}, max_bytes)
+        model = _parse_xacro(source, xacro_args or {}, max_bytes, trust)
     else:
         model = parse_urdf(source, max_bytes=max_bytes)
     ctx = _Context(model.file)
-    root, joints = _select(model, tip, base, ctx)
+    root, joints = _select(model, tip, base, ctx, floating_base)
     _refuse_unsupported(ctx, joints)
     if floating_base:
         if UNIVERSE in model.link_names or ROOT_JOINT in model.joint_map:
@@ -1154,6 +1339,31 @@ def load_urdf(
 
 _XACRO_EXTRA = "pip install 'jaxkin[xacro]' (or pip install xacro)"
 
+XACRO_TIME_LIMIT = 10.0
+"""Seconds :func:`load_urdf` lets xacro expand one file (``trust=True``) before refusing it,
+checked at every element, expression and file xacro reads (real robot descriptions expand in
+well under 0.1 s). Code that runs inside one expression is not interrupted. For a file known to
+be slow, raise it (``jaxkin.urdf.XACRO_TIME_LIMIT = 60``) or expand the file with the ``xacro``
+command."""
+
+XACRO_MAX_ELEMENTS = 100_000
+"""Elements xacro may process while expanding one file in :func:`load_urdf` (macro bodies and
+output elements; a dual-arm Panda description needs about 550) before it is refused: a macro
+that calls itself twice per level doubles at each one. Raise it like
+:data:`XACRO_TIME_LIMIT`."""
+
+_XACRO_LOCK = threading.RLock()  # xacro keeps its state in module globals: one expansion at once
+_xacro_active = threading.local()  # .budget: the caps of this thread's expansion, if any
+_xacro_originals: dict[str, Any] = {}  # xacro's own functions, while the hooks replace them
+_ABSENT = object()
+_SPECIAL_FILES = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISCHR, "a device"),
+    (stat.S_ISBLK, "a device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
 
 def _is_xacro_path(source: Any) -> bool:
     if isinstance(source, str) and _looks_like_xml(source):
@@ -1161,13 +1371,180 @@ def _is_xacro_path(source: Any) -> bool:
     return isinstance(source, (str, os.PathLike)) and str(source).endswith(".xacro")
 
 
-def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int) -> URDFModel:
-    """Expand the xacro file ``source`` with the ``xacro`` package, then parse the result."""
+def _check_trust(trust: Any) -> None:
+    if not isinstance(trust, bool):
+        raise ModelError(
+            f"trust must be True or False, got {trust!r}; trust=True lets load_urdf run the "
+            "code of a xacro file."
+        )
+
+
+class _XacroStop(Exception):
+    """Raised inside xacro by the hooks. Not an ``OSError``, so that an optional include cannot
+    skip it; the refusal itself is kept in the budget, whatever xacro wraps this in."""
+
+
+class _XacroBudget:
+    """The caps of one expansion, checked by the hooks (see :func:`_xacro_caps`)."""
+
+    def __init__(self, label: str, max_bytes: int) -> None:
+        self.label, self.max_bytes = label, max_bytes
+        self.limit, self.max_elements = XACRO_TIME_LIMIT, XACRO_MAX_ELEMENTS
+        self.deadline = time.monotonic() + self.limit
+        self.elements = 0
+        self.refusal: URDFError | None = None
+
+    def refuse(self, problem: str, fix: str, value: str | None = None) -> None:
+        """Record the first refusal and stop xacro."""
+        if self.refusal is None:
+            self.refusal = URDFError(problem, file=self.label, value=value, fix=fix)
+        raise _XacroStop(problem)
+
+    def check(self, elements: int = 0) -> None:
+        """Stop xacro if it is over the time or element cap (or was stopped before)."""
+        if self.refusal is not None:
+            raise _XacroStop(self.refusal.problem)
+        self.elements += elements
+        if self.elements > self.max_elements:
+            self.refuse(
+                f"expanding it makes over {self.max_elements} elements "
+                "(jaxkin.urdf.XACRO_MAX_ELEMENTS): is a macro calling itself more than once?",
+                self._fix("XACRO_MAX_ELEMENTS"),
+            )
+        if time.monotonic() > self.deadline:
+            self.refuse(
+                f"expanding it takes over {self.limit:g} s (jaxkin.urdf.XACRO_TIME_LIMIT): is a "
+                "macro calling itself more than once?",
+                self._fix("XACRO_TIME_LIMIT"),
+            )
+
+    def check_file(self, file: Any, status: os.stat_result) -> None:
+        """Refuse what xacro is about to read unless it is a regular file of ``max_bytes``."""
+        name = os.fspath(file)
+        if not stat.S_ISREG(status.st_mode):
+            kind = next((k for test, k in _SPECIAL_FILES if test(status.st_mode)), "special")
+            self.refuse(
+                f"xacro would read {name!r}, which is {kind}, not a regular file (reading it "
+                "could block or never end).",
+                "include only regular files (.xacro, .urdf, .yaml).",
+                value=name,
+            )
+        if status.st_size > self.max_bytes:
+            self.refuse(
+                f"xacro would read {name!r}: {status.st_size} bytes, over the "
+                f"{self.max_bytes}-byte limit (max_bytes).",
+                "raise the cap with jk.load_urdf(..., max_bytes=N) if the file is legitimate.",
+                value=name,
+            )
+
+    def check_text(self, result: Any) -> None:
+        """Refuse an expression whose value is longer than the whole URDF may be."""
+        if isinstance(result, str) and len(result) > self.max_bytes:
+            self.refuse(
+                f"an expression gives a text of {len(result)} characters, over the "
+                f"{self.max_bytes}-byte limit (max_bytes) of the expanded URDF.",
+                "raise the cap with jk.load_urdf(..., max_bytes=N) if the file is legitimate.",
+            )
+
+    def _fix(self, cap: str) -> str:
+        return (
+            f"if the file is right, expand it with the xacro command (`xacro {self.label} > "
+            f"robot.urdf`) and load robot.urdf, or raise jaxkin.urdf.{cap}."
+        )
+
+
+def _xacro_budget() -> _XacroBudget | None:
+    return getattr(_xacro_active, "budget", None)
+
+
+def _xacro_eval_all(*args: Any, **kwargs: Any) -> Any:
+    """xacro's ``eval_all`` (one element and, recursively, its children), counted and timed."""
+    budget = _xacro_budget()
+    if budget is not None:
+        budget.check(elements=1)
+    return _xacro_originals["eval_all"](*args, **kwargs)
+
+
+def _xacro_eval_text(*args: Any, **kwargs: Any) -> Any:
+    """xacro's ``eval_text`` (an attribute or text with ``${...}``), timed, its value capped."""
+    budget = _xacro_budget()
+    if budget is not None:
+        budget.check()
+    result = _xacro_originals["eval_text"](*args, **kwargs)
+    if budget is not None:
+        budget.check_text(result)
+    return result
+
+
+def _xacro_open(file: Any, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+    """The ``open`` of xacro's module (its files, includes, YAML): only regular files of at most
+    ``max_bytes``, checked on the open descriptor (opened non-blocking, so that a FIFO does not
+    block, and checked after opening, so that one swapped in after a check is refused too)."""
+    original = _xacro_originals["open"]
+    budget = _xacro_budget()
+    if budget is None or not isinstance(file, (str, os.PathLike)) or set(mode) & set("wax+"):
+        return original(file, mode, *args, **kwargs)
+    budget.check()
+    nonblocking = getattr(os, "O_NONBLOCK", 0)
+    fd = os.open(file, os.O_RDONLY | nonblocking | getattr(os, "O_NOCTTY", 0))
+    try:
+        budget.check_file(file, os.fstat(fd))
+        if nonblocking:
+            os.set_blocking(fd, True)
+        return original(fd, mode, *args, **kwargs)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+_XACRO_HOOKS = {"eval_all": _xacro_eval_all, "eval_text": _xacro_eval_text, "open": _xacro_open}
+
+
+@contextmanager
+def _xacro_caps(xacro: Any, budget: _XacroBudget) -> Iterator[None]:
+    """Apply ``budget`` to what xacro does in this thread during the ``with`` block.
+
+    xacro is pure Python and calls its own ``eval_all``, ``eval_text`` and ``open`` through its
+    module's globals: the hooks replace them there (other threads' calls pass straight through)
+    and xacro's own are put back afterwards, on error too. One expansion runs at a time (a lock),
+    since xacro keeps its state in module globals anyway."""
+    with _XACRO_LOCK:
+        outer = _xacro_budget()  # a load_urdf from within a trusted expansion: hooks in place
+        saved = {} if outer is not None else {k: vars(xacro).get(k, _ABSENT) for k in _XACRO_HOOKS}
+        for name, value in saved.items():
+            _xacro_originals[name] = open if value is _ABSENT else value
+            setattr(xacro, name, _XACRO_HOOKS[name])
+        _xacro_active.budget = budget
+        try:
+            yield
+        finally:
+            _xacro_active.budget = outer
+            for name, value in saved.items():
+                if value is _ABSENT:
+                    delattr(xacro, name)
+                else:
+                    setattr(xacro, name, value)
+
+
+def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int, trust: bool) -> URDFModel:
+    """Expand the xacro file ``source`` with the ``xacro`` package (only if ``trust``), within
+    the caps, then parse the result."""
     if not isinstance(source, (str, os.PathLike)) or (
         isinstance(source, str) and _looks_like_xml(source)
     ):
         raise ModelError("xacro_args needs the path of a .xacro file as source.")
     label = str(source)
+    if not trust:
+        raise URDFError(
+            "this is a xacro file, that is a program: xacro evaluates its ${...} expressions as "
+            "Python code, which no sandbox confines (a file can run any code on this machine), "
+            "so jaxkin expands one only when told to.",
+            file=label,
+            fix=f"jk.load_urdf({label!r}, trust=True), only for files you trust; or expand it "
+            f"yourself with the xacro command (`xacro {label} > robot.urdf`, which runs it too) "
+            "and load the URDF.",
+        )
+    _check_max_bytes(max_bytes)
     try:
         import xacro
     except ImportError as exc:
@@ -1176,18 +1553,28 @@ def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int) -> URDFMo
             file=label,
             fix=f"{_XACRO_EXTRA}, or expand it first: `xacro {label} > robot.urdf`.",
         ) from None
-    if not Path(source).is_file():
-        raise URDFError("cannot read the xacro file: no such file.", file=label)
-    mappings = {str(k): str(v) for k, v in args.items()}
     try:
-        text = xacro.process_file(str(source), mappings=mappings).toxml()
+        os.stat(source)
+    except OSError as e:
+        hint = "no such file" if isinstance(e, FileNotFoundError) else e.strerror or str(e)
+        raise URDFError(f"cannot read the xacro file: {hint}.", file=label) from None
+    mappings = {str(k): str(v) for k, v in args.items()}
+    budget = _XacroBudget(label, max_bytes)
+    try:
+        with _xacro_caps(xacro, budget):
+            document = xacro.process_file(str(source), mappings=mappings)
+        text = document.toxml()
     except Exception as e:  # xacro raises many kinds (XacroException, NameError, OSError)
+        if budget.refusal is not None:  # a cap, maybe wrapped by xacro
+            raise budget.refusal from None
         raise URDFError(
             f"xacro could not expand the file: {type(e).__name__}: {' '.join(str(e).split())}",
             file=label,
             fix="fix the file or its arguments (xacro_args={'name': 'value'} for "
             "<xacro:arg name=...>); `xacro FILE name:=value` shows the same error.",
         ) from None
+    if budget.refusal is not None:  # xacro caught the stop and went on
+        raise budget.refusal
     try:
         model = parse_urdf(text.encode("utf-8"), max_bytes=max_bytes)
     except URDFError as e:
@@ -1203,32 +1590,17 @@ def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int) -> URDFMo
     return URDFModel(model.name, label, model.links, model.joints, model.root)
 
 
+def _check_max_bytes(max_bytes: Any) -> None:
+    if not isinstance(max_bytes, int) or isinstance(max_bytes, bool) or max_bytes <= 0:
+        raise ModelError(f"max_bytes must be a positive integer, got {max_bytes!r}.")
+
+
 def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
     """The default frame of the robot made of ``joints`` (parents first, below ``root``), as
     ``(link,)``, or the candidate end frames when its moving joints branch (see "The default
-    frame" in the module doc). Iterative and linear."""
-    children: dict[str, list[URDFJoint]] = {root: []}
-    for j in joints:
-        children.setdefault(j.parent, []).append(j)
-        children.setdefault(j.child, [])
-    moving_below = dict.fromkeys(children, False)  # a moving joint in the link's subtree
-    for j in reversed(joints):  # children before parents
-        if j.type in MOVING_TYPES or j.type in MULTI_DOF_TYPES or moving_below[j.child]:
-            moving_below[j.parent] = True
-    ends = [
-        j
-        for j in joints
-        if (j.type in MOVING_TYPES or j.type in MULTI_DOF_TYPES) and not moving_below[j.child]
-    ]
-
-    def end_frame(link: str) -> str:
-        while len(children[link]) == 1:  # fixed joints only: no moving joint is below
-            link = children[link][0].child
-        return link
-
-    if not ends:  # no moving joint (dof 0): the last frame, as for any robot without a choice
-        return ()
-    return tuple(end_frame(j.child) for j in ends)
+    frame" in the module doc; the rule is :func:`jaxkin.build.end_frames`). No moving joint
+    (dof 0): ``()``, the last frame, as for any robot without a choice."""
+    return end_frames(root, [(j.parent, j.child, j.type != "fixed") for j in joints])
 
 
 def _joint_spec(j: URDFJoint) -> dict[str, Any]:

@@ -1,11 +1,14 @@
 """The default frame (``frame=None``) is never one that some moving joint does not move.
 
 ``jk.load_urdf``: ``tip`` if given; the end of the chain of moving joints (fixed joints followed
-down from the last moving link while there is exactly one child); no default when the moving
+down from the last moving link while there is exactly one child, and where they branch, into
+``tool0``, ROS-Industrial's tool flange, if one of the children is); no default when the moving
 joints branch, and then every function asked for it raises :class:`NoDefaultFrameError` (a
 ``jk.ModelError``) listing the candidate end frames and how to choose, eagerly and under ``jit``.
-The zoo's well-known ``erd/`` arms load as the chain to their standard tool frame
-(``jaxkin.robots.example_robot_data.TOOL_FRAMES``); DH robots keep their last frame.
+The zoo's ``erd/`` robots follow the same rule (``jk.robots.load("erd/ur5_robot")`` is
+``jk.load_urdf`` of its file: ``tool0``), except the arms whose standard tool frame the rule cannot
+give, which load as the chain to it (``jaxkin.robots.example_robot_data.TOOL_FRAMES``); DH robots
+keep their last frame.
 
 Every check of "moves" here is independent of the code under test: the path from a link to the
 root is walked in the parsed file (``parse_urdf``), and for UR5 and Panda the Jacobian itself is
@@ -152,6 +155,46 @@ def test_chain_whose_fixed_leaves_branch_takes_the_last_moving_link():
     assert robot2.frame_names[robot2.tip_frame] == "flange"
 
 
+def test_where_fixed_frames_branch_tool0_is_followed():
+    """REP 199's tool flange: where the last moving link carries several fixed frames and one is
+    ``tool0``, the default goes down to it (and on, while the fixed chain below it is single)."""
+    links = ["base", "l1", "l2", "hand", "ee_link", "tool0", "flange_frame"]
+    fixed = [
+        joint("ee", "fixed", "hand", "ee_link", xyz="0.1 0 0"),
+        joint("tool0_joint", "fixed", "hand", "tool0", xyz="0 0 0.08"),
+    ]
+    robot = jk.load_urdf(urdf(links[:6], [*ARM, fixed[1], fixed[0]]), dtype=np.float64)
+    assert robot.frame_names[-1] == "ee_link" and robot.frame_names[robot.tip_frame] == "tool0"
+    q = np.array([0.2, -0.3, 0.9])
+    np.testing.assert_array_equal(jk.fk(robot, q), jk.fk(robot, q, frame="tool0"))
+    below = jk.load_urdf(
+        urdf(links, [*ARM, *fixed, joint("tcp", "fixed", "tool0", "flange_frame")])
+    )
+    assert below.frame_names[below.tip_frame] == "flange_frame"
+    # deeper: the fixed frames branch below a single fixed flange link
+    on_flange = [f.replace('"hand"', '"flange"') for f in fixed]
+    deep = urdf([*links[:6], "flange"], [*ARM, joint("fl", "fixed", "hand", "flange"), *on_flange])
+    deep = jk.load_urdf(deep)
+    assert deep.frame_names[deep.tip_frame] == "tool0" and deep.frame_names[-1] == "tool0"
+    # the same branch without a tool0 is unchanged: the link where the fixed frames branch
+    other = urdf([*links[:5], "tool1"], [*ARM, fixed[0], fixed[1].replace('"tool0"', '"tool1"')])
+    other = jk.load_urdf(other)
+    assert other.frame_names[other.tip_frame] == "hand"
+    # where the moving joints branch, each candidate follows the same rule
+    arms = urdf(
+        [*links[:6], "l1b", "tool0b"],
+        [
+            *ARM,
+            *fixed,
+            joint("jb", "revolute", "l1", "l1b"),
+            joint("jb_fixed", "fixed", "l1b", "tool0b"),
+        ],
+    )
+    with pytest.raises(NoDefaultFrameError) as info:
+        jk.fk(jk.load_urdf(arms), np.zeros(4))
+    assert info.value.candidates == ("tool0", "tool0b")
+
+
 def test_mimic_fingers_branch_too():
     # one q entry drives both fingers, but no frame is moved by both finger joints
     xml = FINGERS.replace(
@@ -193,16 +236,23 @@ def no_zero_column(robot, frame=None, n=3):
         assert np.all(np.any(J != 0.0, axis=0)), (robot.name, q, J)
 
 
-def test_ur5_default_frame_is_moved_by_every_joint():
+def test_ur5_default_frame_is_moved_by_every_joint_and_the_same_by_path_and_by_name():
     path = erd.path("erd/ur5_robot")
-    whole = jk.load_urdf(path, dtype=np.float64)  # the issue: this defaulted to the leaf 'base'
-    assert whole.frame_names[whole.tip_frame] == "wrist_3_link"  # ee_link and tool0 both hang on it
+    whole = jk.load_urdf(path, dtype=np.float64)  # issue 3: this defaulted to the leaf 'base'
+    # issue 21: ee_link and tool0 both hang on wrist_3_link; tool0 (REP 199) is the default, by
+    # path as by zoo name: one rule, the same robot (the zoo names it after its zoo name)
+    assert whole.frame_names[whole.tip_frame] == "tool0"
     no_zero_column(whole)
     robot = jk.robots.load("erd/ur5_robot", dtype=np.float64)
     assert robot.dof == 6 and robot.frame_names[robot.tip_frame] == "tool0"
-    no_zero_column(robot)
+    assert robot == jk.load_urdf(path, dtype=np.float64, name="erd/ur5_robot")
+    assert robot.frame_names == whole.frame_names and robot.default_frames == whole.default_frames
     q = np.asarray(jk.sample_configurations(robot, 1, 3))[0]
-    np.testing.assert_allclose(jk.fk(robot, q), jk.fk(whole, q, frame="tool0"), atol=1e-15)
+    np.testing.assert_array_equal(jk.fk(robot, q), jk.fk(whole, q))
+    for name in ("erd/ur3_robot", "erd/ur10_robot", "erd/ur5_gripper", "erd/xarm7"):
+        by_name = jk.robots.load(name)
+        assert by_name == jk.load_urdf(erd.path(name), name=name), name
+        assert by_name.frame_names[by_name.tip_frame] == ("link_eef" if "xarm" in name else "tool0")
 
 
 def test_panda_is_a_7_dof_arm_with_its_tcp_as_default_frame():

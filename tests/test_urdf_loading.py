@@ -9,13 +9,14 @@ encodings, dtypes, and the ``example-robot-data`` registry (``"erd/..."`` names;
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 
 import jaxkin as jk
 from jaxkin.robots import example_robot_data as erd
-from jaxkin.urdf import URDFError, load_urdf, parse_urdf
+from jaxkin.urdf import URDFError, URDFWarning, load_urdf, parse_urdf
 
 TOL = 1e-12
 
@@ -249,6 +250,92 @@ def test_limits_are_kept():
     robot = load_urdf(xml, dtype=np.float64)
     assert np.asarray(robot.lower).tolist() == [-2.5, 0.01]
     assert np.asarray(robot.upper).tolist() == [1.25, 0.3]
+
+
+# Files urdfdom loads (issue 21): lower > upper, how some simulators write "no limits", and a
+# repeated identical <axis>. Pinocchio (through urdfdom) is the reference for the poses.
+INVERTED = robot_xml(
+    ["a", "b", "c", "d", "e"],
+    [
+        joint_xml("r", "revolute", "a", "b", "0 0 0.3", "0.1 0 0", "0 0 1", limit=(1.0, -1.0)),
+        joint_xml("p", "prismatic", "b", "c", "0.2 0 0", None, "1 0 0", limit=(0.5, -0.5)),
+        joint_xml("f", "fixed", "c", "d", "0 0.1 0", limit=(2, -2)),
+        joint_xml("w", "revolute", "d", "e", "0 0 0.1", None, "0 1 0", limit=(-0.5, 0.5)),
+    ],
+).replace(  # a fixed joint's <limit>, inverted too: not read
+    'type="fixed">', 'type="fixed"><limit lower="2" upper="-2" effort="1" velocity="1"/>'
+)
+
+
+def pinocchio_poses(xml: str, q) -> dict[str, np.ndarray]:
+    """Every link's pose by Pinocchio (urdfdom's reading of the file) at q (revolute and
+    prismatic joints only, in the file's depth-first order)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pin = pytest.importorskip("pinocchio")
+    model = pin.buildModelFromXML(xml)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
+    return {f.name: data.oMf[i].homogeneous for i, f in enumerate(model.frames)}, model
+
+
+def test_lower_above_upper_means_unbounded_with_one_warning_as_urdfdom_loads_it():
+    with pytest.warns(URDFWarning) as record:
+        robot = load_urdf(INVERTED, dtype=np.float64)
+    assert len(record) == 1  # one warning for the file, naming every such joint and its line
+    message = str(record[0].message)
+    assert message.startswith("<string>: joint 'r' (line 12: 1.0 > -1.0), joint 'p' (line 18: ")
+    assert "unbounded" in message and "Fix:" in message and "'w'" not in message
+    assert "'f'" not in message  # a fixed joint's <limit> is not read
+    assert record[0].filename == __file__  # it points at the caller's line, not into jaxkin
+    assert np.all(np.isneginf(robot.lower[:2])) and np.all(np.isposinf(robot.upper[:2]))
+    assert np.asarray(robot.lower[2]) == -0.5 and np.asarray(robot.upper[2]) == 0.5
+    # urdfdom loads it too (keeping the inverted numbers, which no value satisfies), same poses
+    q = [2.5, -0.8, 0.3]  # outside the written "limits": they mean none
+    poses, model = pinocchio_poses(INVERTED, q)
+    assert model.lowerPositionLimit.tolist()[:2] == [1.0, 0.5]
+    assert model.upperPositionLimit.tolist()[:2] == [-1.0, -0.5]
+    Ts = np.asarray(jk.fk_all(robot, q))
+    for k, name in enumerate(robot.frame_names):
+        np.testing.assert_allclose(Ts[k], poses[name], rtol=0, atol=TOL, err_msg=name)
+    # a sampler and IK see an unbounded joint: samples are finite
+    assert np.all(np.isfinite(np.asarray(jk.sample_configurations(robot, 4, 0))))
+
+
+def test_limits_of_continuous_and_fixed_joints_are_ignored_silently():
+    xml = INVERTED.replace('lower="1.0" upper="-1.0"', 'lower="-1.0" upper="1.0"').replace(
+        'lower="0.5" upper="-0.5"', 'lower="0" upper="0.5"'
+    )
+    xml = xml.replace(
+        '<joint name="w" type="revolute">', '<joint name="w" type="continuous">'
+    ).replace('lower="-0.5" upper="0.5"', 'lower="3" upper="-3"')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning: the docs say these limits are not read
+        robot = load_urdf(xml, dtype=np.float64)
+    assert np.isneginf(robot.lower[2]) and np.isposinf(robot.upper[2])
+    assert robot.lower.tolist()[:2] == [-1.0, 0.0]
+    with pytest.raises(URDFError, match="'abc' is not a number"):  # they must still be numbers
+        load_urdf(xml.replace('lower="3"', 'lower="abc"'))
+
+
+def test_identical_repeated_axes_load_with_one_warning():
+    xml = INVERTED.replace('lower="1.0" upper="-1.0"', 'lower="-1.0" upper="1.0"').replace(
+        'lower="0.5" upper="-0.5"', 'lower="0" upper="0.5"'
+    )
+    dup = xml.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 1"/>\n    <axis xyz="0 0 1.0"/>')
+    dup = dup.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><axis xyz="0 1 0"/>')
+    with pytest.warns(URDFWarning) as record:
+        robot = load_urdf(dup, dtype=np.float64)
+    assert len(record) == 1
+    message = str(record[0].message)
+    assert "joint 'r' (<axis> on lines 11, 12), joint 'w' (<axis> on lines 28, 28)" in message
+    assert "as urdfdom takes the first" in message
+    assert robot == load_urdf(xml, dtype=np.float64)
+    q = [0.7, 0.2, -0.4]
+    poses, _ = pinocchio_poses(dup, q)
+    Ts = np.asarray(jk.fk_all(robot, q))
+    for k, name in enumerate(robot.frame_names):
+        np.testing.assert_allclose(Ts[k], poses[name], rtol=0, atol=TOL, err_msg=name)
 
 
 # ----------------------------------------------------------------------------------- frames, tree

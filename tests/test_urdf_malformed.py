@@ -4,10 +4,11 @@ element, attribute and offending value, and saying how to fix it.
 Classes (ISSUE 3, item 3): DTD and entity declarations of any kind (entity-expansion bomb, an
 external entity that would read a local file, an external DTD, parameter entities), undefined
 entities, the size cap, xacro, zero / non-finite / non-numeric / wrongly-sized / huge numbers,
-lower > upper, unknown and refused joint types, missing and duplicate links and joints, several
-roots, cycles, links with two parents, mimic joints pointing nowhere or in a cycle, XML syntax
-errors. The hostile payloads (a secret file's content, the expansion of an entity) never appear in
-a model or in a message, and nothing but the given file is ever opened.
+differing repeated <axis> elements, unknown and refused joint types, missing and duplicate
+links and joints, several roots, cycles, links with two parents, mimic joints pointing nowhere
+or in a cycle, XML syntax errors. The hostile payloads (a secret file's content, the expansion
+of an entity) never appear in a model or in a message, and nothing but the given file is ever
+opened.
 """
 
 from __future__ import annotations
@@ -129,12 +130,18 @@ CASES = [
         "+inf",
     ),
     (
-        "lower_above_upper",
-        sub('lower="-1" upper="1"', 'lower="1.5" upper="1"'),
-        ["<limit> of joint 'j1'", "lower limit 1.5 is above upper limit 1.0"],
+        # urdfdom silently takes the first; jaxkin does not guess (identical repeats load with a
+        # warning: test_urdf_loading.test_identical_repeated_axes_load_with_one_warning)
+        "differing_axes",
+        sub('<axis xyz="0 0 1"/>', '<axis xyz="0 0 1"/>\n    <axis xyz="0 1 0"/>'),
+        [
+            "<joint name='j1'>",
+            "2 <axis> elements that differ",
+            "xyz='0 0 1' on line 10 and xyz='0 1 0' on line 11",
+        ],
         11,
-        "lower",
-        "1.5",
+        "xyz",
+        "0 1 0",
     ),
     (
         "not_a_number",
@@ -677,14 +684,15 @@ def test_max_bytes_must_be_a_positive_integer(bad):
 
 # ----------------------------------------------------------------------------------- sources
 def test_xacro_files_are_never_run_by_the_parser(tmp_path):
-    """parse_urdf refuses a .xacro path; load_urdf expands it with xacro (tests/test_xacro.py)."""
+    """parse_urdf refuses a .xacro path; load_urdf(..., trust=True) expands it with xacro
+    (tests/test_xacro.py; tests/test_xacro_hostile.py for the refusal without trust)."""
     path = tmp_path / "arm.urdf.xacro"
     path.write_text(VALID)
     with pytest.raises(
         URDFError, match=r"never runs xacro.*xacro .*arm\.urdf\.xacro > robot\.urdf"
     ):
         parse_urdf(path)
-    assert load_urdf(path) == load_urdf(VALID)
+    assert load_urdf(path, trust=True) == load_urdf(VALID)
 
 
 @pytest.mark.parametrize("source", [None, 3.5, ["<robot/>"], b""], ids=repr)
@@ -700,6 +708,45 @@ def test_missing_file_and_directory(tmp_path):
         load_urdf(tmp_path)
     with pytest.raises(URDFError, match="no such file"):
         load_urdf("robot.urdf")  # a str that is not XML is a path
+
+
+def test_symlink_loop_is_named_as_such(tmp_path):
+    a, b = tmp_path / "a.urdf", tmp_path / "b.urdf"
+    os.symlink(b, a)
+    os.symlink(a, b)
+    with pytest.raises(URDFError, match="symbolic link loop") as info:
+        load_urdf(a)
+    assert "no such file" not in str(info.value) and info.value.file == str(a)
+    dangling = tmp_path / "dangling.urdf"
+    os.symlink(tmp_path / "gone.urdf", dangling)
+    with pytest.raises(URDFError, match=r"symbolic link to '.*gone\.urdf', which does not exist"):
+        load_urdf(dangling)
+
+
+def test_base_with_nothing_moving_below_it_is_refused():
+    """An explicit base below which nothing moves (a leaf, or only fixed joints) would give a
+    robot with no degree of freedom: refused, naming the link and a base that works."""
+    xml = sub("</robot>", EXTRA_LINK + FIXED_L3 + "</robot>")
+    for base in ("l2", "l3"):  # l2: only the fixed l3 below it; l3: a leaf
+        with pytest.raises(URDFError) as info:
+            load_urdf(xml, base=base)
+        message = str(info.value)
+        assert f"nothing moves below base {base!r}" in message, message
+        assert "base='l1'" in message and "base=None" in message and "Fix:" in message
+        assert info.value.element == f"<link name={base!r}>"
+        assert info.value.line == (5 if base == "l2" else 20)
+    with pytest.raises(URDFError, match=r"no joint between base 'l2' and tip 'l3' moves.*'l1'"):
+        load_urdf(xml, base="l2", tip="l3")
+    # what does move, and what was never meant to, still loads
+    assert load_urdf(xml, base="l1").dof == 1
+    assert load_urdf(xml, base="l3", floating_base=True).dof == 6  # the free joint moves it
+    assert load_urdf(xml, tip="l3").dof == 2
+    rigid = '<robot name="r"><link name="a"/><link name="b"/>' + FIXED_AB + "</robot>"
+    assert load_urdf(rigid).dof == 0 and load_urdf(rigid, base="b").dof == 0  # dof 0 whole
+
+
+FIXED_L3 = '  <joint name="j3" type="fixed"><parent link="l2"/><child link="l3"/></joint>\n'
+FIXED_AB = '<joint name="f" type="fixed"><parent link="a"/><child link="b"/></joint>'
 
 
 def test_tip_and_base_errors_name_the_links():
@@ -733,7 +780,7 @@ def test_case_table_covers_every_class():
         "nan_axis",
         "inf_origin",
         "nan_limit",
-        "lower_above_upper",
+        "differing_axes",
         "unknown_type",
         "undeclared_child",
         "duplicate_link",

@@ -1,6 +1,7 @@
-"""xacro: ``jk.load_urdf("robot.urdf.xacro", xacro_args=...)`` expands the file with the xacro
-package and parses the result with the strict URDF parser. Oracle: the URDF the xacro file
-should produce, written by hand; the two loaded robots compare equal (every number, name, limit
+"""xacro: ``jk.load_urdf("robot.urdf.xacro", xacro_args=..., trust=True)`` expands the file with
+the xacro package (trusted files here; tests/test_xacro_hostile.py for the refusals) and parses
+the result with the strict URDF parser. Oracle: the URDF the xacro file should produce, written
+by hand; the two loaded robots compare equal (every number, name, limit
 and the default frame), for the argument's default and a given value; and a real xacro (the
 KUKA LBR iiwa of rtbdata) against the URDF shipped beside it."""
 
@@ -81,10 +82,10 @@ def xacro_file(tmp_path):
 
 
 def test_xacro_expands_to_the_urdf_it_should_produce(xacro_file):
-    default = jk.load_urdf(xacro_file, dtype=np.float64)
+    default = jk.load_urdf(xacro_file, dtype=np.float64, trust=True)
     assert default == jk.load_urdf(_expected(0.25), dtype=np.float64)
     assert default.frame_names == ("base", "shoulder_link", "elbow_link")
-    longer = jk.load_urdf(str(xacro_file), xacro_args={"reach": 0.5}, dtype=np.float64)
+    longer = jk.load_urdf(str(xacro_file), xacro_args={"reach": 0.5}, dtype=np.float64, trust=True)
     assert longer == jk.load_urdf(_expected(0.5), dtype=np.float64)
     assert longer.frame_names[longer.tip_frame] == "tool" and longer != default
     np.testing.assert_array_equal(np.asarray(longer.params["xyz"])[-1], [1.0, 0.0, 0.0])
@@ -94,21 +95,21 @@ def test_errors_name_the_xacro_file(xacro_file, tmp_path):
     bad = tmp_path / "bad.urdf.xacro"
     bad.write_text(ROBOT.replace('lower="-1"', 'lower="${undefined_thing}"'))
     with pytest.raises(URDFError, match=r"xacro could not expand.*undefined_thing") as e:
-        jk.load_urdf(bad)
+        jk.load_urdf(bad, trust=True)
     assert e.value.file == str(bad)
     worse = tmp_path / "worse.urdf.xacro"
     worse.write_text(ROBOT.replace('parent="shoulder_link"', 'parent="nowhere"'))
     with pytest.raises(URDFError, match=r"nowhere.*\(in the URDF that xacro expanded\)") as e:
-        jk.load_urdf(worse)
+        jk.load_urdf(worse, trust=True)
     assert e.value.file == str(worse)
     with pytest.raises(URDFError, match="no such file"):
-        jk.load_urdf(tmp_path / "missing.urdf.xacro")
+        jk.load_urdf(tmp_path / "missing.urdf.xacro", trust=True)
     with pytest.raises(jk.ModelError, match="xacro_args needs the path"):
-        jk.load_urdf(_expected(0.25), xacro_args={"reach": 1})
+        jk.load_urdf(_expected(0.25), xacro_args={"reach": 1}, trust=True)
 
 
 def test_the_parser_itself_never_runs_xacro(xacro_file):
-    with pytest.raises(URDFError, match=r"never runs xacro.*jk\.load_urdf"):
+    with pytest.raises(URDFError, match=r"never runs xacro.*jk\.load_urdf\(.*, trust=True\)"):
         parse_urdf(xacro_file)
 
 
@@ -122,7 +123,7 @@ def test_without_xacro_the_error_names_the_extra(xacro_file, monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_xacro)
     with pytest.raises(URDFError, match=r"pip install 'jaxkin\[xacro\]'"):
-        jk.load_urdf(xacro_file)
+        jk.load_urdf(xacro_file, trust=True)
 
 
 def test_a_real_xacro_expands_to_the_urdf_shipped_beside_it(monkeypatch):
@@ -145,7 +146,7 @@ def test_a_real_xacro_expands_to_the_urdf_shipped_beside_it(monkeypatch):
     # Toolbox, replaces it with its own search): here, the two package folders
     monkeypatch.setattr(substitution_args, "_eval_find", lambda name: str(shares[name]))
     urdf = root / "kuka_lbr_iiwa" / "urdf"
-    expanded = jk.load_urdf(urdf / "lbr_iiwa_14_r820.xacro", dtype=np.float64)
+    expanded = jk.load_urdf(urdf / "lbr_iiwa_14_r820.xacro", dtype=np.float64, trust=True)
     shipped = jk.load_urdf(urdf / "lbr_iiwa_14_r820.urdf", dtype=np.float64)
     assert expanded == shipped  # every number, name, limit and the default frame
     assert expanded.dof == 7 and expanded.frame_names[expanded.tip_frame] == "tool0"

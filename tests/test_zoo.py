@@ -219,6 +219,59 @@ def test_unknown_robot_lists_available_names():
     assert issubclass(jk.UnknownRobotError, jk.JaxkinError)
 
 
+def test_unknown_names_suggest_the_names_that_start_with_or_contain_them():
+    """``erd/ur5`` is a prefix of ``erd/ur5_robot``: that is suggested first, not the closest
+    spelling (``erd/ur3``); names of every collection are suggested for a bare name."""
+    erd, mjcf = jk.robots.erd_names(), jk.robots.mjcf_names()
+    assert jk.robots.close_names("erd/ur5", ["erd/ur3", "erd/ur5_robot", "erd/ur50"]) == [
+        "erd/ur50",
+        "erd/ur5_robot",
+        "erd/ur3",
+    ]
+    assert jk.robots.close_names("UR5_ROBOT", ["erd/ur5_robot", "ur5"]) == ["erd/ur5_robot"]
+    assert jk.robots.close_names("", ZOO) == [] and jk.robots.close_names(3, ZOO) == []
+    if "erd/ur5_robot" in erd:
+        with pytest.raises(jk.UnknownRobotError, match=r"Did you mean 'erd/ur5_robot' or ") as e:
+            jk.robots.load("erd/ur5")
+        assert "erd/ur3'" not in str(e.value)
+        with pytest.raises(jk.UnknownRobotError, match=r"'ur5_robot'\. Did you mean 'erd/ur5_"):
+            jk.robots.info("ur5_robot")
+    if "mjcf/jaco_arm" in mjcf:
+        with pytest.raises(jk.UnknownRobotError, match=r"Did you mean 'mjcf/jaco_arm' or "):
+            jk.robots.load("mjcf/jaco")
+
+
+@pytest.mark.parametrize("name", ZOO)
+def test_robots_written_in_python_have_no_path(name):
+    entry = jk.robots.info(name)
+    assert entry.path is None and entry.tip is None and entry.base is None
+
+
+def test_info_path_is_the_file_and_loads_the_same_robot():
+    """``info(name).path`` is a file that the loader turns into the robot ``load(name)`` gives
+    (``tip``/``base``: the part the zoo loads, None for the whole file); ``source`` is words."""
+    wanted = ("erd/ur5_robot", "erd/panda", "erd/kinova", "erd/xarm7")
+    erd = [n for n in wanted if n in jk.robots.erd_names()]
+    for name in erd:
+        entry = jk.robots.info(name)
+        assert entry.path.is_file() and entry.path.suffix == ".urdf", name
+        assert str(entry.path) in entry.source and "example-robot-data" in entry.source
+        robot = jk.load_urdf(entry.path, tip=entry.tip, base=entry.base, name=name)
+        assert robot == jk.robots.load(name), name
+    if "erd/ur5_robot" in erd:  # loaded whole: the path alone gives it
+        entry = jk.robots.info("erd/ur5_robot")
+        assert entry.tip is None and entry.base is None
+        assert jk.load_urdf(entry.path, name="erd/ur5_robot") == jk.robots.load("erd/ur5_robot")
+    if "erd/panda" in erd:
+        assert jk.robots.info("erd/panda").tip == "panda_hand_tcp"
+    for name in ("mjcf/reacher", "mjcf/jaco_arm"):
+        if name in jk.robots.mjcf_names():
+            entry = jk.robots.info(name)
+            assert entry.path.is_file() and entry.path.suffix == ".xml", name
+            robot = jk.load_mjcf(entry.path, tip=entry.tip, base=entry.base, name=name)
+            assert robot == jk.robots.load(name), name
+
+
 @pytest.mark.parametrize("name", ["ur5", "two_link_planar"])
 def test_unknown_parameter_raises(name):
     with pytest.raises(jk.JaxkinError) as info:

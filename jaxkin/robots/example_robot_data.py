@@ -18,28 +18,32 @@ are the zoo's DH models): nothing is shadowed. When two files share a stem, each
 ``jk.robots.erd_names()`` lists them (empty when the package is not installed);
 ``jk.robots.load("erd/panda", dtype=..., tip=..., base=..., floating_base=...)`` loads one
 (``floating_base=True``: a free root joint for humanoids and legged robots);
-``jk.robots.info("erd/panda").source`` is its path. Some files of the collection are not
-loadable kinematic models, and loading them raises a :class:`jaxkin.ModelError` that says why
-and lists the other files of the same package (``ur3.urdf`` of 6.0 is an empty xacro output,
-use ``"erd/ur3_robot"``; ``alex_psyonic_hands`` has mimic joints whose leader does not
-exist). ``quadrotor_base`` and ``iris_simple`` have no moving joint: they load with dof 0
-(``fk``/``fk_all`` work, Jacobians have shape (6, 0)).
+``jk.robots.info("erd/panda").path`` is its file (``.source`` says the same in words, with the
+package's version), and ``.tip`` the chain the zoo loads (see below), so that
+``jk.load_urdf(info.path, tip=info.tip, name=info.name)`` builds the same robot. Some files
+of the collection are not loadable kinematic models, and loading them raises a
+:class:`jaxkin.ModelError` that says why and lists the other files of the same package
+(``ur3.urdf`` of 6.0 is an empty xacro output, use ``"erd/ur3_robot"``; ``alex_psyonic_hands``
+has mimic joints whose leader does not exist). ``quadrotor_base`` and ``iris_simple`` have no
+moving joint: they load with dof 0 (``fk``/``fk_all`` work, Jacobians have shape (6, 0)).
 
 Default frames
 --------------
-``jk.robots.load("erd/...")`` without ``tip=`` loads the well-known arms as the chain to their
-standard tool frame (:data:`TOOL_FRAMES`), which is then the default frame of ``fk``,
-``geometric_jacobian`` and the rest; gripper joints, which do not move that frame, are not
-entries of ``q``:
+``jk.robots.load("erd/...")`` loads the file whole, with :func:`jaxkin.load_urdf`'s default
+frame (see "The default frame" in :mod:`jaxkin.urdf`), the same robot as
+``jk.load_urdf(path)``: the UR arms (``erd/ur3_robot``, ``erd/ur5_robot``, ``erd/ur10_robot``,
+their ``_joint_limited_robot`` variants, ``erd/ur3_gripper``, ``erd/ur5_gripper``) end at
+``tool0`` (the ROS-Industrial tool flange, where their fixed frames branch), ``erd/xarm7`` at
+``link_eef``. Where that rule cannot give an arm's standard tool frame, because its gripper's
+moving joints branch the robot or its tool frame is one of several fixed frames none of which
+is ``tool0``, the zoo loads, without ``tip=``, the chain to that frame (:data:`TOOL_FRAMES`),
+which is then the default frame of ``fk``, ``geometric_jacobian`` and the rest; gripper joints,
+which do not move it, are not entries of ``q``:
 
 * ``erd/panda``, ``erd/panda_collision``: ``panda_hand_tcp`` (the Franka Hand's TCP), or
   ``panda_hand`` in a file without it; 7 dof, the finger joints left out.
-* ``erd/ur3_robot``, ``erd/ur5_robot``, ``erd/ur10_robot``, their ``_joint_limited_robot``
-  variants, ``erd/ur3_gripper``, ``erd/ur5_gripper``: ``tool0`` (the ROS-Industrial tool
-  flange); 6 dof.
 * ``erd/kinova``: ``j2s6s200_end_effector`` (Kinova's end-effector frame, 0.16 m past link 6,
-  not the fixed finger links); 6 dof.
-* ``erd/xarm7``: ``link_eef``; 7 dof.
+  not the fixed finger links that hang beside it); 6 dof.
 * ``erd/z1``: ``link06`` (the flange; the gripper joint is left out); 6 dof.
 * ``erd/so100``: ``gripper`` (the wrist-roll link that carries the fixed jaw; the moving jaw's
   joint is left out); 5 dof.
@@ -77,27 +81,20 @@ ENV = "JAXKIN_EXAMPLE_ROBOT_DATA"
 _DIST = "example-robot-data"
 _MARKER = "example-robot-data/robots/"
 
-_UR = ("tool0",)
 TOOL_FRAMES: dict[str, tuple[str, ...]] = {
     "erd/panda": ("panda_hand_tcp", "panda_hand"),
     "erd/panda_collision": ("panda_hand_tcp", "panda_hand"),
-    "erd/ur3_robot": _UR,
-    "erd/ur5_robot": _UR,
-    "erd/ur10_robot": _UR,
-    "erd/ur3_joint_limited_robot": _UR,
-    "erd/ur5_joint_limited_robot": _UR,
-    "erd/ur10_joint_limited_robot": _UR,
-    "erd/ur3_gripper": _UR,
-    "erd/ur5_gripper": _UR,
     "erd/kinova": ("j2s6s200_end_effector",),
-    "erd/xarm7": ("link_eef",),
     "erd/z1": ("link06",),
     "erd/so100": ("gripper",),
     "erd/so101": ("gripper_frame_link",),
     "erd/talos_left_arm": ("wrist_left_ft_tool_link",),
 }
-"""The standard tool frame of each well-known arm. The first of these links that the file has
-becomes ``tip`` when :func:`load` is given none (see "Default frames" above)."""
+"""The standard tool frame of each well-known arm whose file's default frame (the rule of
+:func:`jaxkin.load_urdf`) is not it: the gripper's moving joints branch the robot (panda, z1,
+so100, so101, talos_left_arm), or the tool frame is one of several fixed frames, none named
+``tool0`` (kinova). The first of these links that the file has becomes ``tip`` when
+:func:`load` is given none (see "Default frames" above)."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -155,13 +152,11 @@ def path(name: str) -> Path:
             f"files). Install it with `pip install example-robot-data`, or set {ENV} to its "
             "robots folder."
         )
-    import difflib
+    from . import did_you_mean
 
-    close = difflib.get_close_matches(name, list(index), n=3, cutoff=0.75)
-    hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
     raise UnknownRobotError(
-        f"unknown example-robot-data robot {name!r}.{hint} jk.robots.erd_names() lists all "
-        f"{len(index)}."
+        f"unknown example-robot-data robot {name!r}.{did_you_mean(name, list(index))} "
+        f"jk.robots.erd_names() lists all {len(index)}."
     )
 
 
@@ -193,10 +188,11 @@ def load(
     floating_base: bool = False,
 ) -> Robot:
     """Load the example-robot-data robot ``name`` (see :func:`names`) with
-    :func:`jaxkin.load_urdf` (``tip``/``base`` select a chain or subtree). Without ``tip``, a
-    well-known arm is loaded as the chain to its standard tool frame (:data:`TOOL_FRAMES`, e.g.
-    ``panda_hand_tcp``, ``tool0``), its default frame. ``floating_base=True`` adds a free root
-    joint ``"root_joint"`` (humanoids, quadrupeds: see :func:`jaxkin.load_urdf`), e.g.
+    :func:`jaxkin.load_urdf` (``tip``/``base`` select a chain or subtree). Without ``tip``, the
+    whole file, with :func:`jaxkin.load_urdf`'s default frame (``erd/ur5_robot``: ``tool0``),
+    except the arms of :data:`TOOL_FRAMES`, loaded as the chain to their standard tool frame
+    (``erd/panda``: ``panda_hand_tcp``), their default frame. ``floating_base=True`` adds a free
+    root joint ``"root_joint"`` (humanoids, quadrupeds: see :func:`jaxkin.load_urdf`), e.g.
     ``jk.robots.load("erd/solo12", floating_base=True)``."""
     from ..urdf import URDFError, load_urdf
 
@@ -224,10 +220,16 @@ def load(
 
 
 def entry(name: str):
-    """The :class:`jaxkin.robots.ZooEntry` of an ``"erd/..."`` name."""
+    """The :class:`jaxkin.robots.ZooEntry` of an ``"erd/..."`` name: ``path`` its file, ``tip``
+    the standard tool frame the zoo loads the chain to (:data:`TOOL_FRAMES`), or None."""
+    from ..urdf import URDFError
     from . import ZooEntry
 
     p = path(name)
+    try:
+        tip = tool_frame(name)
+    except URDFError:  # an unloadable file: loading it says why
+        tip = None
     rel = p.relative_to(robots_dir()) if robots_dir() is not None else p
     try:
         version = importlib.metadata.version(_DIST)
@@ -247,4 +249,6 @@ def entry(name: str):
         builder=builder,
         description=f"example-robot-data {rel} (URDF, loaded with jk.load_urdf)",
         source=f"{p} (example-robot-data {version})",
+        path=p,
+        tip=tip,
     )

@@ -8,16 +8,20 @@ MJCF model names
 ----------------
 ``jk.robots.mjcf_names()`` lists the models whose package is installed;
 ``jk.robots.load("mjcf/jaco_arm", dtype=..., tip=..., base=...)`` loads one;
-``jk.robots.info("mjcf/jaco_arm").source`` is its path. Each model is loaded as the part of the
-file that is the robot (``base``: scene objects with free joints, tables and targets are left
-out) and, for the arms, as the chain to their standard tool frame (``tip``), which is then the
-default frame; pass ``tip=``/``base=`` to choose another part.
+``jk.robots.info("mjcf/jaco_arm").path`` is its file (``.source`` says the same in words, with
+the package's version), and ``.tip``/``.base`` the part loaded, so that
+``jk.load_mjcf(info.path, tip=info.tip, base=info.base, name=info.name)`` builds the same robot.
+Each model is loaded as the part of the file that is the robot (``base``: scene objects with
+free joints, tables and targets are left out) and, for the arms whose standard tool frame is
+not already :func:`jaxkin.load_mjcf`'s default frame, as the chain to it (``tip``), which is
+then the default frame; pass ``tip=``/``base=`` to choose another part.
 
 =======================  ======================  =============================================
 name                     package                 file; part loaded
 =======================  ======================  =============================================
 ``mjcf/jaco_arm``        ``dm-control``          ``third_party/kinova/jaco_arm.xml``: Kinova
-                                                 Jaco, 6 dof, tip ``wristsite`` (the flange)
+                                                 Jaco, 6 dof, default frame ``wristsite`` (the
+                                                 flange)
 ``mjcf/jaco_hand``       ``dm-control``          ``third_party/kinova/jaco_hand.xml``: its
                                                  3-finger hand (branches: no default frame)
 ``mjcf/manipulator``     ``dm-control``          ``suite/manipulator.xml``: planar arm, 4 dof,
@@ -68,8 +72,7 @@ MODELS: dict[str, Model] = {
     "mjcf/jaco_arm": Model(
         _DMC,
         "dm_control/third_party/kinova/jaco_arm.xml",
-        "Kinova Jaco arm (dm_control), 6 dof, to its flange site",
-        tip="wristsite",
+        "Kinova Jaco arm (dm_control), 6 dof, to its flange site",  # the default frame
     ),
     "mjcf/jaco_hand": Model(
         _DMC, "dm_control/third_party/kinova/jaco_hand.xml", "Kinova Jaco 3-finger hand"
@@ -128,12 +131,11 @@ def names() -> list[str]:
 def path(name: str) -> Path:
     """The MJCF file of ``name``."""
     if name not in MODELS:
-        import difflib
+        from . import did_you_mean
 
-        close = difflib.get_close_matches(name, list(MODELS), n=3, cutoff=0.6)
-        hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         raise UnknownRobotError(
-            f"unknown MJCF robot {name!r}.{hint} jaxkin knows {sorted(MODELS)}; "
+            f"unknown MJCF robot {name!r}.{did_you_mean(name, list(MODELS))} jaxkin knows "
+            f"{sorted(MODELS)}; "
             "jk.robots.mjcf_names() lists those installed. Load any MJCF file with "
             "jk.load_mjcf(path)."
         )
@@ -178,4 +180,7 @@ def entry(name: str):
         builder=builder,
         description=f"{m.description}: {m.dist} {m.file} (MJCF, loaded with jk.load_mjcf)",
         source=f"{p} ({m.dist} {version})",
+        path=p,
+        tip=m.tip,
+        base=m.base,
     )
