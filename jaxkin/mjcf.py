@@ -80,8 +80,9 @@ The default frame of an MJCF model
 ----------------------------------
 As for URDF (see :mod:`jaxkin.urdf`, "The default frame"): ``tip=`` (a body or site) when given;
 otherwise the end of the chain of moving joints, following fixed frames (welded bodies, sites)
-down while there is exactly one; none when the moving joints branch (then functions need
-``frame=`` and list the candidates).
+down while there is exactly one, or into the one named ``tool0`` where they branch (the same
+rule, :func:`jaxkin.build.end_frames`); none when the moving joints branch (then functions
+need ``frame=`` and list the candidates).
 """
 
 from __future__ import annotations
@@ -96,6 +97,7 @@ from typing import Any
 
 import numpy as np
 
+from .build import end_frames
 from .errors import JaxkinError, ModelError
 from .model import Robot
 from .rigid import axis_rotation, homogeneous, quaternion_matrix
@@ -582,23 +584,9 @@ def _tendon_joints(mujoco, m, joint_names: list[str]) -> list[list[str]]:
 
 
 def _default_frames(root: str, specs: Sequence[Mapping[str, Any]]) -> tuple[str, ...]:
-    """The end frames of the moving joints' branches (see "The default frame")."""
-    children: dict[str, list[Mapping[str, Any]]] = {root: []}
-    for s in specs:
-        children.setdefault(s["parent"], []).append(s)
-        children.setdefault(s["child"], [])
-    moving_below = dict.fromkeys(children, False)
-    for s in reversed(specs):
-        if s["type"] != "fixed" or moving_below[s["child"]]:
-            moving_below[s["parent"]] = True
-    ends = [s for s in specs if s["type"] != "fixed" and not moving_below[s["child"]]]
-    out = []
-    for s in ends:
-        frame = s["child"]
-        while len(children[frame]) == 1:
-            frame = children[frame][0]["child"]
-        out.append(frame)
-    return tuple(out)
+    """The end frames of the moving joints' branches: the file loaders' one rule
+    (:func:`jaxkin.build.end_frames`; see "The default frame")."""
+    return end_frames(root, [(s["parent"], s["child"], s["type"] != "fixed") for s in specs])
 
 
 def load_mjcf(

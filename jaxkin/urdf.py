@@ -128,14 +128,14 @@ from .model import Robot
 __all__ = [
     "DEFAULT_MAX_BYTES",
     "MAX_MAGNITUDE",
+    "XACRO_MAX_ELEMENTS",
+    "XACRO_TIME_LIMIT",
     "URDFError",
     "URDFJoint",
     "URDFLink",
     "URDFMimic",
     "URDFModel",
     "URDFWarning",
-    "XACRO_MAX_ELEMENTS",
-    "XACRO_TIME_LIMIT",
     "load_urdf",
     "parse_urdf",
 ]

@@ -95,7 +95,7 @@ def test_integrate_names_dt_and_its_shape(dt, shape):
     with pytest.raises(jk.ShapeError, match=wanted):
         jk.integrate(FLOATING, q, v, dt=dt)
     arm = jk.robots.load("two_link_planar")  # the vector-space path too
-    with pytest.raises(jk.ShapeError, match="jk.integrate: dt"):
+    with pytest.raises(jk.ShapeError, match=r"jk\.integrate: dt"):
         jk.integrate(arm, np.zeros(2), np.zeros(2), dt=dt)
     with pytest.raises(jk.ShapeError, match="dt must be one number"):
         jk.integrate(arm, np.zeros(2), np.zeros(2), dt="abc")

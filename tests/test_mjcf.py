@@ -177,6 +177,15 @@ def test_default_frame_rules():
         jk.fk(robot, np.zeros(3))
     chain = jk.load_mjcf(branching, tip="t1", dtype=np.float64)
     assert chain.joint_names == ("w", "a") and chain.frame_names[chain.tip_frame] == "t1"
+    # the file loaders' one rule: where the fixed frames branch, the tool flange 'tool0'
+    flange = _mj(
+        f"""<body name="arm"><joint name="w"/>{G}
+              <body name="wrist"><site name="ee"/><site name="tool0" pos="0 0 .1"/></body>
+            </body>"""
+    )
+    assert jk.load_mjcf(flange).frame_names[jk.load_mjcf(flange).tip_frame] == "tool0"
+    no_flange = flange.replace('"tool0"', '"flange"')
+    assert jk.load_mjcf(no_flange).frame_names[jk.load_mjcf(no_flange).tip_frame] == "wrist"
 
 
 def test_base_selects_a_subtree_relative_to_its_body():
