@@ -3,15 +3,8 @@ bench/README.md); ``python3 -m bench.scale`` is the 10-million-configuration str
 
 from __future__ import annotations
 
-import os
-import sys
-
 from .jacobians import main
+from .report import exit_without_teardown
 
 if __name__ == "__main__":
-    rc = main()
-    # Leave without the interpreter's teardown: the Robotics Toolbox's nanobind extension
-    # otherwise prints pages of "leaked instance" warnings at exit. Everything is written.
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(rc)
+    exit_without_teardown(main())

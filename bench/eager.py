@@ -24,7 +24,8 @@
 
 Writes ``bench/results/eager.json`` (``eager_quick.json`` with ``--quick``) and prints markdown
 tables; ``--write-readme`` puts them into bench/README.md between the ``eager:start`` /
-``eager:end`` markers.
+``eager:end`` markers; ``--from-json PATH`` reports an earlier run without measuring. This module
+measures; :mod:`bench.eager_report` writes the tables.
 """
 
 from __future__ import annotations
@@ -47,19 +48,16 @@ import numpy as np
 
 import jaxkin as jk
 
-from .peers import Pinocchio, _quiet, robot_sources
+from .eager_report import report
+from .peers import Pinocchio, quiet, robot_sources
 from .report import (
     HERE,
     RESULTS_DIR,
-    fmt_diff,
-    fmt_n,
+    exit_without_teardown,
     fmt_rate,
-    fmt_us,
     log,
     machine_info,
-    markdown_table,
     median,
-    replace_section,
     timed,
     utc_now,
     write_json,
@@ -300,7 +298,7 @@ def measure_pk_compiled(
     import pytorch_kinematics as pk
     import torch
 
-    with _quiet():
+    with quiet():
         chain0 = pk.build_serial_chain_from_urdf(src.urdf.encode(), src.tip)
     if tuple(chain0.get_joint_parameter_names()) != tuple(robot.joint_names):
         raise RuntimeError("pytorch_kinematics' joint order differs from jaxkin's")
@@ -369,137 +367,7 @@ def measure_pk_compiled(
     return out
 
 
-# ---------------------------------------------------------------------------- report
-def tables(res: dict[str, Any]) -> str:
-    m = res["machine"]
-    load = res["load_average_before"], res["load_average_after"]
-    parts = [
-        f"`python3 -m bench.eager` ({res['date']}; {', '.join(m['cpu_model'])}, "
-        f"{m['cpus_usable']} cores; load average (1, 5, 15 min) {_load(load[0])} before, "
-        f"{_load(load[1])} after; jax {m['jax']}, Pinocchio {m['pinocchio']}, torch {m['torch']}, "
-        f"pytorch-kinematics {m['pytorch_kinematics']}). Panda from example-robot-data, float64.",
-        "",
-        "**Eager calls** (outside `jit`, one configuration; first call in the process, then the "
-        "median of later calls on new configurations):",
-        "",
-    ]
-    rows = []
-    for r in res["eager"]:
-        pin = r.get("pinocchio_s")
-        rows.append(
-            [
-                f"`{r['function']}`",
-                f"{r['first_call_s']:.2f}",
-                fmt_us(r["per_call_s"] * 1e6),
-                fmt_us(pin * 1e6) if pin else "-",
-                fmt_diff(r["max_abs_diff_vs_jit"]),
-                fmt_diff(r.get("max_abs_diff_vs_pinocchio", math.nan)) or "-",
-            ]
-        )
-    parts.append(
-        markdown_table(
-            [
-                "function",
-                "first call s",
-                "later calls us (median)",
-                "Pinocchio one call us",
-                "diff vs jit",
-                "diff vs Pinocchio",
-            ],
-            rows,
-            "lrrrrr",
-        )
-    )
-    tree_rows = []
-    for t in res["trees"]:
-        for k in ("fk", "geometric_jacobian"):
-            if k not in t or "max_abs_diff_vs_pinocchio" not in t[k]:
-                where = f"`{t['frame']}` (depth {t['depth']})" if "frame" in t else "-"
-                build = f"{t['build_s']:.2f}" if "build_s" in t else "-"
-                first = f"{t[k]['first_call_s']:.2f}" if k in t else t.get("error", "-")
-                later = f"{t[k]['per_call_s'] * 1e3:.3g}" if k in t else "-"
-                row = [f"{t['joints']:,}", where, f"`{k}(robot, q, frame)`", build, first, later]
-                tree_rows.append([*row, "not checked (" + t.get("error", "stopped") + ")"])
-                continue
-            tree_rows.append(
-                [
-                    f"{t['joints']:,}",
-                    f"`{t['frame']}` (depth {t['depth']})",
-                    f"`{k}(robot, q, frame)`",
-                    f"{t['build_s']:.2f}",
-                    f"{t[k]['first_call_s']:.2f}",
-                    f"{t[k]['per_call_s'] * 1e3:.3g}",
-                    fmt_diff(t[k]["max_abs_diff_vs_pinocchio"]),
-                ]
-            )
-    parts += [
-        "",
-        "**One frame of a large tree**"
-        + (f" (measured {res['trees_date']}, a separate run)" if "trees_date" in res else "")
-        + " (`bench.eager.random_tree`: built with "
-        "`jk.Robot.from_joints`, a fixed seed; its deepest frame; eager calls in a fresh process, "
-        "first call included; checked against Pinocchio on `jk.to_urdf` of the frame's "
-        "ancestor chain, other columns exactly 0):",
-        "",
-        markdown_table(
-            [
-                "joints",
-                "frame",
-                "function",
-                "build s",
-                "first call s",
-                "later calls ms (median)",
-                "diff vs Pinocchio",
-            ],
-            tree_rows,
-            "lllrrrr",
-        ),
-    ]
-    p = res.get("pk_compiled")
-    if p and p.get("rows"):
-        parts += [
-            "",
-            f"**pytorch_kinematics, compiled `jacobian_tensor`** (`{p['how']}`; its README's "
-            "fastest documented mode) against jaxkin `jax.jit(jax.vmap(jk.geometric_jacobian))`, "
-            "Panda (N, 6, 7), samples interleaved in one process; rate = Jacobians per second "
-            "(median); first call = compile + run for that shape:",
-            "",
-            markdown_table(
-                [
-                    "dtype",
-                    "N",
-                    "pytorch_kinematics compiled",
-                    "jaxkin jit(vmap)",
-                    "jaxkin / pk",
-                    "pk first call s",
-                    "jaxkin first call s",
-                    "max abs diff",
-                ],
-                [
-                    [
-                        r["dtype"],
-                        fmt_n(r["n"]),
-                        f"{fmt_rate(r['pk_rate'])} ({r['pk_threads']} thr)",
-                        fmt_rate(r["jaxkin_rate"]),
-                        f"{r['jaxkin_rate'] / r['pk_rate']:.2f}x",
-                        f"{r['pk_first_call_s']:.2f}",
-                        f"{r['jaxkin_first_call_s']:.2f}",
-                        fmt_diff(r["max_abs_diff"]),
-                    ]
-                    for r in p["rows"]
-                ],
-                "lrrrrrrr",
-            ),
-        ]
-    elif p:
-        parts += ["", f"pytorch_kinematics compiled: not measured ({p.get('error')})."]
-    return "\n".join(parts)
-
-
-def _load(x) -> str:
-    return ", ".join(f"{v:.1f}" for v in x)
-
-
+# ---------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repeats, a 1,000-joint tree")
@@ -512,6 +380,9 @@ def main(argv: list[str] | None = None) -> int:
         "--update-trees", type=Path, default=None, help="re-measure only the trees of this result"
     )
     ap.add_argument("--repeats", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--from-json", type=Path, default=None, help="report an earlier run (no measuring)"
+    )
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     warnings.simplefilter("ignore", DeprecationWarning)
@@ -527,10 +398,10 @@ def main(argv: list[str] | None = None) -> int:
         res["trees_date"] = utc_now()
         res["trees_load_average_after"] = os.getloadavg()
         write_json(args.update_trees, res)
-        text = tables(res)
-        print(text)
-        if args.write_readme:
-            replace_section(HERE / "README.md", text, "<!-- eager:start -->", "<!-- eager:end -->")
+        report(res, args.write_readme)
+        return 0
+    if args.from_json is not None:
+        report(json.loads(args.from_json.read_text()), args.write_readme)
         return 0
     src = robot_sources(["panda"])[0]
     robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=np.float64, name=src.name)
@@ -557,16 +428,10 @@ def main(argv: list[str] | None = None) -> int:
     res["load_average_after"] = os.getloadavg()
     out = args.out or RESULTS_DIR / ("eager_quick.json" if args.quick else "eager.json")
     write_json(out, res)
-    text = tables(res)
-    print(text)
-    if args.write_readme:
-        replace_section(HERE / "README.md", text, "<!-- eager:start -->", "<!-- eager:end -->")
+    report(res, args.write_readme)
     log(f"wrote {out}")
     return 0
 
 
 if __name__ == "__main__":
-    rc = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(rc)
+    exit_without_teardown(main())

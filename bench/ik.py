@@ -31,7 +31,8 @@ chain come from one URDF that ``jk.to_urdf`` writes from the zoo's modified-DH P
 toolbox's ``models.DH.Panda`` has the same table (tests/test_oracle_rtb.py) and gets the zoo's
 tool.
 
-This module measures; :mod:`bench.ik_report` writes the table.
+This module measures, with the judge and the runners of :mod:`bench.ik_harness`;
+:mod:`bench.ik_report` writes the table.
 
 Usage: ``python3 -m bench.ik [--n N] [--seeds S] [--quick] [--out PATH]``; writes
 ``bench/results/ik.json`` and prints a markdown table.
@@ -43,20 +44,28 @@ import argparse
 import gc
 import os
 import sys
-import time
 import warnings
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxkin as jk
 
+from .ik_harness import (
+    Judge,
+    fk_disagreement,
+    one_target_at_a_time,
+    pk_chain,
+    rtb_solver,
+    run_jaxkin,
+    run_pinocchio,
+    run_pk,
+    target_poses,
+)
 from .ik_report import results_table
-from .report import RESULTS_DIR, first_and_repeats, log, machine_info, utc_now, write_json
+from .report import RESULTS_DIR, log, machine_info, utc_now, write_json
 
 TARGET_SEED = 2024
 START_SEED = 7
@@ -65,174 +74,56 @@ LOOSE = 1e-6
 
 
 # ----------------------------------------------------------------------------- judge
-class Judge:
-    """Pose errors of answers, with jaxkin's float64 fk, and the success criteria."""
-
-    def __init__(self, robot: jk.Robot, Ts: np.ndarray):
-        self.robot = robot
-        self.Ts = Ts
-        self._fk = jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))
-        self.lo = np.asarray(robot.lower)
-        self.hi = np.asarray(robot.upper)
-
-    def __call__(self, qs: np.ndarray) -> dict[str, Any]:
-        qs = np.asarray(qs, dtype=np.float64)
-        finite = np.all(np.isfinite(qs), axis=1)
-        T = np.asarray(self._fk(jnp.asarray(np.where(finite[:, None], qs, 0.0))))
-        dp = np.linalg.norm(T[:, :3, 3] - self.Ts[:, :3, 3], axis=1)
-        M = self.Ts[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2)
-        a = np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], 1)
-        dw = np.arctan2(0.5 * np.linalg.norm(a, axis=1), 0.5 * (np.trace(M, axis1=1, axis2=2) - 1))
-        within = np.all((qs >= self.lo - 1e-12) & (qs <= self.hi + 1e-12), axis=1) & finite
-        ok = within & (dp <= TOL) & (dw <= TOL)
-        loose = within & (dp <= LOOSE) & (dw <= LOOSE)
-        return dict(
-            success=float(ok.mean()),
-            success_loose=float(loose.mean()),
-            within_limits=float(within.mean()),
-            median_position_error_of_successes=float(np.median(dp[ok])) if ok.any() else None,
-            max_position_error_of_successes=float(dp[ok].max()) if ok.any() else None,
-            max_orientation_error_of_successes=float(dw[ok].max()) if ok.any() else None,
-        )
+def verdict(judge: Judge, qs: np.ndarray) -> dict[str, Any]:
+    """The shares of answers that succeed (position and rotation angle within :data:`TOL`, in
+    the limits), succeed loosely (:data:`LOOSE`) and lie within the limits, and the errors of the
+    successes."""
+    e = judge.errors(qs)
+    dp, dw, within = np.linalg.norm(e.position, axis=1), e.angle, e.within
+    ok = judge.norm_success(qs, TOL, TOL)
+    loose = judge.norm_success(qs, LOOSE, LOOSE)
+    return dict(
+        success=float(ok.mean()),
+        success_loose=float(loose.mean()),
+        within_limits=float(within.mean()),
+        median_position_error_of_successes=float(np.median(dp[ok])) if ok.any() else None,
+        max_position_error_of_successes=float(dp[ok].max()) if ok.any() else None,
+        max_orientation_error_of_successes=float(dw[ok].max()) if ok.any() else None,
+    )
 
 
 # ----------------------------------------------------------------------------- solvers
-def run_jaxkin(robot, Ts, seeds, repeats: int) -> dict[str, Any]:
-    # exactly the shared starts: the given seeds, or q0 alone (num_seeds=1: no default restarts)
+def run_jaxkin_from(robot, Ts, seeds, repeats: int) -> dict[str, Any]:
+    """Exactly the shared starts: the given seeds, or q0 alone (num_seeds=1: no default
+    restarts)."""
     extra = {"seeds": seeds[1:]} if len(seeds) > 1 else {"num_seeds": 1}
-    kw = dict(q0=seeds[0], throw=False, **extra)
-
-    def solve():
-        sol = jk.solve_ik(robot, Ts, **kw)
-        jax.block_until_ready(sol)
-        return sol
-
-    timing = first_and_repeats(solve, repeats)
-    sol = timing.pop("result")
     return dict(
-        q=np.asarray(sol.q),
-        own_converged=float(np.mean(np.asarray(sol.converged))),
-        **timing,
+        **run_jaxkin(robot, Ts, seeds[0], repeats, **extra),
         how="jk.solve_ik (LM, lax.while_loop, 64+ lanes), defaults",
     )
 
 
-def one_target_at_a_time(
-    Ts: np.ndarray,
-    dof: int,
-    solve: Callable[[np.ndarray], tuple[np.ndarray, bool]],
-    budget_s: float,
-) -> dict[str, Any]:
-    """``solve(T) -> (q, own success flag)`` for each target in turn, until the targets or
-    ``budget_s`` run out; the total time is extrapolated to every target."""
-    qs = np.full((len(Ts), dof), np.nan)
-    own = np.zeros(len(Ts), bool)
-    t0 = time.perf_counter()
-    done = 0
-    for k, T in enumerate(Ts):
-        qs[k], own[k] = solve(T)
-        done = k + 1
-        if time.perf_counter() - t0 > budget_s:
-            break
-    elapsed = time.perf_counter() - t0
+def run_pinocchio_docs(model, fid, Ts, seeds, lo, hi, time_budget_s: float) -> dict[str, Any]:
     return dict(
-        q=qs,
-        own_converged=float(own[:done].mean()),
-        total_s=elapsed * len(Ts) / done,
-        measured_targets=done,
-    )
-
-
-def run_pinocchio(model, fid, Ts, seeds, lo, hi, time_budget_s: float) -> dict[str, Any]:
-    """The documentation example's loop (frame version), eps 1e-10, next start on failure."""
-    import pinocchio as pin
-
-    data = model.createData()
-    eps, it_max, dt, damp = 1e-10, 1000, 1e-1, 1e-12
-    iterations = 0
-
-    def dls(oMdes, q_start: np.ndarray) -> tuple[np.ndarray, bool]:
-        nonlocal iterations
-        q = q_start.copy()
-        for _ in range(it_max):
-            pin.framesForwardKinematics(model, data, q)
-            iMd = data.oMf[fid].actInv(oMdes)
-            err = pin.log(iMd).vector
-            if np.linalg.norm(err) < eps:
-                return q, True
-            J = pin.computeFrameJacobian(model, data, q, fid)  # LOCAL
-            J = -np.dot(pin.Jlog6(iMd.inverse()), J)
-            v = -J.T.dot(np.linalg.solve(J.dot(J.T) + damp * np.eye(6), err))
-            q = pin.integrate(model, q, v * dt)
-            iterations += 1
-        return q, False
-
-    def solve(T: np.ndarray) -> tuple[np.ndarray, bool]:
-        oMdes = pin.SE3(T[:3, :3].copy(), T[:3, 3].copy())
-        for q_start in seeds:
-            q, success = dls(oMdes, q_start)
-            if success and np.all((q >= lo) & (q <= hi)):
-                return q, True
-        return q, False
-
-    out = one_target_at_a_time(Ts, model.nq, solve, time_budget_s)
-    return dict(
-        **out,
-        iterations=iterations,
+        **run_pinocchio(model, fid, Ts, seeds, lo, hi, time_budget_s),
         how="Pinocchio docs DLS loop (log6, Jlog6, DT=0.1, damp=1e-12, IT_MAX=1000), eps=1e-10",
     )
 
 
 def run_rtb(rtb_robot, Ts, seeds, time_budget_s: float) -> dict[str, Any]:
-    ets = rtb_robot.ets()
-
-    def solve(T: np.ndarray) -> tuple[np.ndarray, bool]:
-        sol = ets.ikine_LM(T, q0=seeds, slimit=len(seeds), ilimit=100, tol=1e-20, joint_limits=True)
-        return sol.q, bool(sol.success)
-
-    out = one_target_at_a_time(Ts, len(seeds[0]), solve, time_budget_s)
+    solve = rtb_solver(
+        rtb_robot.ets(), q0=seeds, slimit=len(seeds), ilimit=100, tol=1e-20, joint_limits=True
+    )
     return dict(
-        **out,
+        **one_target_at_a_time(Ts, len(seeds[0]), solve, time_budget_s),
         how="ets.ikine_LM(q0=seeds, slimit=S, ilimit=100, tol=1e-20, joint_limits=True)",
     )
 
 
-def pk_chain(urdf: str):
-    """The float64 pytorch_kinematics chain of ``urdf`` to its ``tool`` link."""
-    import pytorch_kinematics as pk
-    import torch
-
-    chain = pk.build_serial_chain_from_urdf(urdf.encode(), end_link_name="tool")
-    return chain.to(dtype=torch.float64)
-
-
-def run_pk(urdf: str, Ts, seeds, lo, hi) -> dict[str, Any]:
-    import pytorch_kinematics as pk
-    import torch
-
-    chain = pk_chain(urdf)
-    limits = torch.tensor(np.stack([lo, hi], 1), dtype=torch.float64)
-    ik = pk.PseudoInverseIK(
-        chain,
-        retry_configs=torch.tensor(seeds, dtype=torch.float64),
-        joint_limits=limits,
-        max_iterations=200,
-        pos_tolerance=1e-10,
-        rot_tolerance=1e-10,
-        early_stopping_any_converged=True,
-    )
-    target = pk.Transform3d(matrix=torch.tensor(Ts, dtype=torch.float64))
-    t0 = time.perf_counter()
-    sol = ik.solve(target)
-    elapsed = time.perf_counter() - t0
-    conv = sol.converged.numpy()
-    err = (sol.err_pos + sol.err_rot).numpy()
-    pick = np.where(conv.any(1), conv.argmax(1), err.argmin(1))
-    q = sol.solutions.numpy()[np.arange(len(Ts)), pick]
+def run_pk_seeds(urdf: str, Ts, seeds, lo, hi) -> dict[str, Any]:
+    out = run_pk(pk_chain(urdf, "tool"), Ts, seeds, lo, hi, max_iterations=200, tol=1e-10)
     return dict(
-        q=q,
-        own_converged=float(conv.any(1).mean()),
-        total_s=elapsed,
+        **out,
         how="PseudoInverseIK(retry_configs=seeds, max_iterations=200, tol 1e-10, "
         "early_stopping_any_converged=True), float64 chain",
     )
@@ -243,22 +134,23 @@ def check_models(robot, pin_model, fid, rtb_robot, urdf, qs) -> dict[str, float]
     """Largest fk difference of each peer's model from jaxkin's, over ``qs``."""
     import pinocchio as pin
 
-    T_jk = np.asarray(jax.vmap(lambda q: jk.fk(robot, q))(jnp.asarray(qs)))
     data = pin_model.createData()
-    out = {}
-    d = 0.0
-    for q, T in zip(qs, T_jk, strict=True):
+
+    def pin_pose(q):
         pin.framesForwardKinematics(pin_model, data, q)
-        d = max(d, float(np.abs(data.oMf[fid].homogeneous - T).max()))
-    out["pinocchio"] = d
-    out["robotics_toolbox"] = max(
-        float(np.abs(rtb_robot.fkine(q).A - T).max()) for q, T in zip(qs, T_jk, strict=True)
-    )
+        return np.array(data.oMf[fid].homogeneous)
+
+    out = {
+        "pinocchio": fk_disagreement(robot, qs, np.stack([pin_pose(q) for q in qs])),
+        "robotics_toolbox": fk_disagreement(
+            robot, qs, np.stack([rtb_robot.fkine(q).A for q in qs])
+        ),
+    }
     try:
         import torch
 
-        m = pk_chain(urdf).forward_kinematics(torch.tensor(qs)).get_matrix().numpy()
-        out["pytorch_kinematics"] = float(np.abs(m - T_jk).max())
+        m = pk_chain(urdf, "tool").forward_kinematics(torch.tensor(qs)).get_matrix().numpy()
+        out["pytorch_kinematics"] = fk_disagreement(robot, qs, m)
     except ImportError:
         pass
     return out
@@ -298,16 +190,16 @@ def solve_all(problem: dict[str, Any], starts: np.ndarray, args) -> dict[str, di
     S = len(starts)
     results = {}
     log(f"S = {S}: jaxkin")
-    results["jaxkin"] = run_jaxkin(p["robot"], p["Ts"], starts, args.repeats)
+    results["jaxkin"] = run_jaxkin_from(p["robot"], p["Ts"], starts, args.repeats)
     if "pk" not in args.skip:
         log(f"S = {S}: pytorch_kinematics")
-        results["pytorch_kinematics"] = run_pk(p["urdf"], p["Ts"], starts, p["lo"], p["hi"])
+        results["pytorch_kinematics"] = run_pk_seeds(p["urdf"], p["Ts"], starts, p["lo"], p["hi"])
     if "rtb" not in args.skip:
         log(f"S = {S}: Robotics Toolbox")
         results["robotics_toolbox"] = run_rtb(p["rtb_robot"], p["Ts"], starts, args.budget)
     if "pinocchio" not in args.skip:
         log(f"S = {S}: Pinocchio")
-        results["pinocchio"] = run_pinocchio(
+        results["pinocchio"] = run_pinocchio_docs(
             p["pin_model"], p["fid"], p["Ts"], starts, p["lo"], p["hi"], args.budget
         )
     return results
@@ -319,10 +211,10 @@ def judge_rows(problem: dict[str, Any], S: int, n: int, results: dict) -> list[d
     for name, res in results.items():
         q = res.pop("q")
         measured = res.get("measured_targets", n)
-        verdict = Judge(problem["robot"], problem["Ts"][:measured])(q[:measured])
+        judged = verdict(Judge(problem["robot"], problem["Ts"][:measured]), q[:measured])
         total = res.pop("total_s", None) or res["steady_s"]
-        rows.append(dict(solver=name, starts=S, n=n, total_s=total, **verdict, **res))
-        log(f"  {name}: {verdict['success']:.3f} success, {total:.3f} s")
+        rows.append(dict(solver=name, starts=S, n=n, total_s=total, **judged, **res))
+        log(f"  {name}: {judged['success']:.3f} success, {total:.3f} s")
     return rows
 
 
@@ -335,7 +227,7 @@ def setup(n: int, n_seeds: int) -> tuple[dict[str, Any], np.ndarray, np.ndarray]
     robot = jk.robots.load("panda", dtype=np.float64)
     q_star = np.asarray(jk.sample_configurations(robot, n, TARGET_SEED))
     seeds = np.asarray(jk.sample_configurations(robot, n_seeds, START_SEED))
-    Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(q_star)))
+    Ts = target_poses(robot, q_star)
     urdf = jk.to_urdf(robot)
     pin_model = pin.buildModelFromXML(urdf)
     rtb_robot = rtb.models.DH.Panda()

@@ -30,6 +30,7 @@ import numpy as np
 
 import jaxkin as jk
 
+from .ik_harness import ROBOTS, random_targets, sampling_middle
 from .report import (
     RESULTS_DIR,
     first_and_repeats,
@@ -41,18 +42,10 @@ from .report import (
     write_json,
 )
 
-ROBOTS = {
-    "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
-    "ur5": lambda: jk.robots.load("ur5"),
-    "niryo_one": lambda: jk.robots.load("niryo_one"),
-}
-
 
 def _cases(robot: jk.Robot, n: int):
-    qs = jk.sample_configurations(robot, n, jax.random.key(1))
-    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
-    lo, hi = jk.sampling_bounds(robot)
-    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
+    _, T = random_targets(robot, n, jax.random.key(1))
+    q0 = sampling_middle(robot)
     X = jnp.zeros((n, 4, 4)).at[:, 0, 3].set(1.0).at[:, 1, 2].set(-1.0).at[:, 2, 1].set(1.0)
     T_dot = T @ X  # move along x and turn about x in the target's own axes
     w = jax.random.normal(jax.random.key(2), (n, robot.dof))

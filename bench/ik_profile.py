@@ -33,20 +33,17 @@ import numpy as np
 import jaxkin as jk
 from jaxkin import ik as ik_module
 
-ROBOTS = {
-    "panda": lambda: jk.robots.load("erd/panda", tip="panda_hand"),
-    "ur5": lambda: jk.robots.load("ur5"),
-}
+from .ik_harness import ROBOTS, random_targets, sampling_middle
+
+PROFILED = ("panda", "ur5")
 
 
 def problem(name: str, n: int):
     """``(robot, qs, T, solve)``: n random reachable targets and the jitted default solve from
     the middle of the limits, compiled (one call made)."""
     robot = ROBOTS[name]()
-    qs = jk.sample_configurations(robot, n, jax.random.key(0))
-    T = jax.vmap(lambda q: jk.fk(robot, q))(qs)
-    lo, hi = jk.sampling_bounds(robot)
-    q0 = jnp.asarray(0.5 * (np.asarray(lo) + np.asarray(hi)))
+    qs, T = random_targets(robot, n, jax.random.key(0))
+    q0 = sampling_middle(robot)
     solve = jax.jit(lambda T: jk.solve_ik(robot, T, q0, throw=False))
     jax.block_until_ready(solve(T))
     return robot, qs, T, solve
@@ -117,10 +114,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--trace", action="store_true", help="kernels per loop iteration")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
-    for name in ROBOTS:
+    for name in PROFILED:
         print(profile(name, args.n), flush=True)
     if args.trace:
-        for name in ROBOTS:
+        for name in PROFILED:
             print(kernels(name, args.n), flush=True)
 
 

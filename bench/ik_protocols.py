@@ -2,7 +2,10 @@
 
 ``python3 -m bench.ik_protocols [--quick] [--write-md]`` (``--quick``: 300 targets per arm,
 peers on 50) writes ``bench/results/ik_protocols.json`` and prints the tables; ``--write-md``
-puts them into bench/IK.md between the ``protocols:start`` / ``protocols:end`` markers.
+puts them into bench/IK.md between the ``protocols:start`` / ``protocols:end`` markers;
+``--from-json PATH`` reports an earlier run without measuring. This module measures, with the
+judge and the runners of :mod:`bench.ik_harness`; :mod:`bench.ik_protocols_report` writes the
+tables.
 
 **TRAC-IK's protocol** (Beeson and Ames, 2015): per arm, ``N`` (10,000) targets ``fk(q*)`` of
 configurations drawn uniformly within the joint limits (``jk.sample_configurations``, fixed key;
@@ -21,7 +24,7 @@ rotation vector of ``R R_target^T`` in radians, both in base axes, as KDL's ``di
 * **Robotics Toolbox** ``ets.ikine_LM(T, q0=mid, tol=1e-12, joint_limits=True)`` (its defaults
   otherwise: 30 iterations, 100 random restarts; ``E = 0.5 |e|^2 < 1e-12``), only where its URDF
   import agrees with jaxkin's fk.
-* **Pinocchio**, its documentation's DLS loop (``bench.ik.run_pinocchio``: eps 1e-10, 1000
+* **Pinocchio**, its documentation's DLS loop (``bench.ik_harness.run_pinocchio``: eps 1e-10, 1000
   iterations), from the mid seed, no restarts (the example has none).
 * **pytorch_kinematics** ``PseudoInverseIK(chain, retry_configs=[mid], max_iterations=100,
   pos_tolerance=1e-5, rot_tolerance=1e-5, joint_limits=...)``, float64, batched.
@@ -43,7 +46,6 @@ import argparse
 import gc
 import math
 import os
-import sys
 import tempfile
 import time
 import warnings
@@ -51,32 +53,30 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxkin as jk
 
-from .ik import run_pinocchio
-from .peers import Pinocchio, RobotSource, _quiet, erd_urdf
-from .report import (
-    HERE,
-    RESULTS_DIR,
-    log,
-    machine_info,
-    markdown_table,
-    median,
-    replace_section,
-    timed,
-    utc_now,
-    write_json,
+from .ik_harness import (
+    Judge,
+    fk_disagreement,
+    one_target_at_a_time,
+    pk_chain,
+    rtb_solver,
+    run_jaxkin,
+    run_pinocchio,
+    run_pk,
+    target_poses,
 )
+from .ik_protocols_report import load, report
+from .peers import Pinocchio, RobotSource, erd_urdf, quiet
+from .report import HERE, RESULTS_DIR, exit_without_teardown, log, machine_info, utc_now, write_json
 
 TARGET_SEED = 15
 GPU_SEED = 16
 TOL = 1e-5
 PRECISE = 1e-9
 GPU_POS, GPU_ROT = 5e-3, 5e-2
-PUBLISHED_GPU = {"PyRoki": 13.3e-3, "cuRobo": 26.5e-3}  # s per 1,000 targets, RTX 4090
 ROOT = HERE.parent
 
 
@@ -116,73 +116,37 @@ def mid_seed(robot: jk.Robot) -> np.ndarray:
     return np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), 0.0)
 
 
-# ---------------------------------------------------------------------------- judge
-class Judge:
-    """Per-component pose errors with jaxkin's float64 fk: position and rotation vector of
-    ``R R_target^T`` (base axes), and whether every joint is within its limits."""
-
-    def __init__(self, robot: jk.Robot, Ts: np.ndarray):
-        self.Ts = Ts
-        self._fk = jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))
-        self.lo, self.hi = np.asarray(robot.lower), np.asarray(robot.upper)
-
-    def errors(self, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 6) absolute error components (inf for a non-finite answer) and (n,) in-limits."""
-        qs = np.asarray(qs, dtype=np.float64)
-        Ts = self.Ts[: len(qs)]
-        finite = np.all(np.isfinite(qs), axis=1)
-        T = np.asarray(self._fk(jnp.asarray(np.where(finite[:, None], qs, 0.0))))
-        dp = T[:, :3, 3] - Ts[:, :3, 3]
-        M = T[:, :3, :3] @ np.swapaxes(Ts[:, :3, :3], 1, 2)
-        v = 0.5 * np.stack(
-            [M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], 1
-        )
-        s = np.linalg.norm(v, axis=1)
-        angle = np.arctan2(s, 0.5 * (np.trace(M, axis1=1, axis2=2) - 1))
-        scale = np.where(s > 1e-300, angle / np.maximum(s, 1e-300), 1.0)
-        dw = v * scale[:, None]
-        err = np.abs(np.concatenate([dp, dw], 1))
-        err[~finite] = np.inf
-        within = finite & np.all((qs >= self.lo - 1e-12) & (qs <= self.hi + 1e-12), axis=1)
-        return err, within
-
-    def success(self, qs: np.ndarray, tol: float) -> np.ndarray:
-        err, within = self.errors(qs)
-        return within & np.all(err <= tol, axis=1)
-
-    def gpu_success(self, qs: np.ndarray) -> np.ndarray:
-        err, within = self.errors(qs)
-        pos = np.linalg.norm(err[:, :3], axis=1)
-        rot = np.linalg.norm(err[:, 3:], axis=1)
-        return within & (pos <= GPU_POS) & (rot <= GPU_ROT)
-
-
 # ---------------------------------------------------------------------------- solvers
-def run_jaxkin(robot, Ts, q0, repeats: int, **kw) -> dict[str, Any]:
-    def solve():
-        sol = jk.solve_ik(robot, Ts, q0=q0, throw=False, **kw)
-        return jax.block_until_ready(sol)
-
-    sol, first = timed(solve)
-    times = [timed(solve)[1] for _ in range(repeats)]
+def jaxkin_row(robot, Ts, q0, repeats: int, **kw) -> dict[str, Any]:
+    """:func:`bench.ik_harness.run_jaxkin` as this protocol's row: steady time as ``total_s``."""
+    res = run_jaxkin(robot, Ts, q0, repeats, **kw)
     return dict(
-        q=np.asarray(sol.q),
+        q=res["q"],
         n=len(Ts),
-        total_s=median(times),
-        first_call_s=first,
-        samples_s=times,
-        own_converged=float(np.mean(np.asarray(sol.converged))),
+        total_s=res["steady_s"],
+        first_call_s=res["first_call_s"],
+        samples_s=res["samples_s"],
+        own_converged=res["own_converged"],
     )
 
 
-def _one_at_a_time(Ts, dof, solve, budget_s: float) -> dict[str, Any]:
-    qs, t0 = [], time.perf_counter()
-    for k, T in enumerate(Ts):
-        qs.append(solve(k, T))
-        if time.perf_counter() - t0 > budget_s:
-            break
-    elapsed = time.perf_counter() - t0
-    return dict(q=np.array(qs).reshape(-1, dof), n=len(qs), total_s=elapsed)
+def measured(out: dict[str, Any], n_targets: int) -> dict[str, Any]:
+    """A :func:`bench.ik_harness.one_target_at_a_time` result as this protocol's row: the
+    answers and the time of the measured targets alone."""
+    n = out["measured_targets"]
+    return dict(q=out["q"][:n], n=n, total_s=out["total_s"] * n / n_targets)
+
+
+def check_configurations(robot) -> np.ndarray:
+    """The configurations on which a peer's model is checked against jaxkin's fk."""
+    return np.asarray(jk.sample_configurations(robot, 5, 99))
+
+
+def agreeing(what: str, diff: float) -> float:
+    """``diff`` (a peer's largest fk difference from jaxkin's), refused above 1e-9."""
+    if diff > 1e-9:
+        raise RuntimeError(f"{what} disagrees with jaxkin's fk by {diff:.1e}")
+    return diff
 
 
 def run_tracik(src: RobotSource, robot, Ts, mid, budget_s: float) -> dict[str, Any]:
@@ -190,28 +154,24 @@ def run_tracik(src: RobotSource, robot, Ts, mid, budget_s: float) -> dict[str, A
     from scipy.spatial.transform import Rotation
 
     base = robot.frame_names[0]
-    with _quiet():
+    with quiet():
         solver = pytracik.TRAC_IK(base, src.tip, src.urdf, 0.005, TOL, pytracik.SolveType.Speed)
     if pytracik.get_num_joints(solver) != robot.dof:
         raise RuntimeError(f"TRAC-IK chain has {pytracik.get_num_joints(solver)} joints")
     lo = np.where(np.isfinite(robot.lower), robot.lower, -2 * math.pi)
     hi = np.where(np.isfinite(robot.upper), robot.upper, 2 * math.pi)
     pytracik.set_joint_limits(solver, [float(x) for x in lo], [float(x) for x in hi])
-    fk_diff = max(
-        float(np.abs(pytracik.fk(solver, q) - np.asarray(jk.fk(robot, q))).max())
-        for q in np.asarray(jk.sample_configurations(robot, 5, 99))
-    )
-    if fk_diff > 1e-9:
-        raise RuntimeError(f"TRAC-IK's chain disagrees with jaxkin's fk by {fk_diff:.1e}")
+    qs = check_configurations(robot)
+    poses = np.stack([pytracik.fk(solver, q) for q in qs])
+    fk_diff = agreeing("TRAC-IK's chain", fk_disagreement(robot, qs, poses))
     quats = Rotation.from_matrix(Ts[:, :3, :3]).as_quat()  # x, y, z, w
 
     def solve(k, T):
         out = pytracik.ik(solver, mid, *T[:3, 3], *quats[k])
-        return out[1:] if out[0] >= 0 else np.full(robot.dof, np.nan)
+        return (out[1:], True) if out[0] >= 0 else (np.full(robot.dof, np.nan), False)
 
-    res = _one_at_a_time(Ts, robot.dof, solve, budget_s)
-    res["fk_max_abs_diff"] = fk_diff
-    return res
+    res = measured(one_target_at_a_time(Ts, robot.dof, solve, budget_s), len(Ts))
+    return dict(**res, fk_max_abs_diff=fk_diff)
 
 
 def run_rtb(src: RobotSource, robot, Ts, mid, budget_s: float) -> dict[str, Any]:
@@ -220,69 +180,55 @@ def run_rtb(src: RobotSource, robot, Ts, mid, budget_s: float) -> dict[str, Any]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "arm.urdf"
         path.write_text(src.urdf)
-        with warnings.catch_warnings(), _quiet():
+        with warnings.catch_warnings(), quiet():
             warnings.simplefilter("ignore")
             ets = rtb.Robot.URDF(str(path)).ets(end=src.tip)
     if ets.n != robot.dof:
         raise RuntimeError(f"RTB's ETS has {ets.n} joints, jaxkin {robot.dof}")
-    qs = np.asarray(jk.sample_configurations(robot, 5, 99))
-    fk_diff = max(float(np.abs(ets.fkine(q).A - np.asarray(jk.fk(robot, q))).max()) for q in qs)
-    if fk_diff > 1e-9:
-        raise RuntimeError(f"its URDF import disagrees with jaxkin's fk by {fk_diff:.1e}")
+    qs = check_configurations(robot)
+    poses = np.stack([ets.fkine(q).A for q in qs])
+    fk_diff = agreeing("its URDF import", fk_disagreement(robot, qs, poses))
+    ikine_lm = rtb_solver(ets, q0=mid, tol=1e-12, joint_limits=True)
 
-    def solve(k, T):
-        sol = ets.ikine_LM(T, q0=mid, tol=1e-12, joint_limits=True)
-        return sol.q if sol.success else np.full(robot.dof, np.nan)
+    def solve(k, T):  # an answer it calls failed counts as failed
+        q, ok = ikine_lm(k, T)
+        return (q if ok else np.full(robot.dof, np.nan)), ok
 
-    res = _one_at_a_time(Ts, robot.dof, solve, budget_s)
-    res["fk_max_abs_diff"] = fk_diff
-    return res
+    res = measured(one_target_at_a_time(Ts, robot.dof, solve, budget_s), len(Ts))
+    return dict(**res, fk_max_abs_diff=fk_diff)
 
 
 def run_pin(src: RobotSource, robot, Ts, mid, budget_s: float) -> dict[str, Any]:
     pin = Pinocchio(src, robot)  # refuses a model whose q differs from jaxkin's
-    qs = np.asarray(jk.sample_configurations(robot, 5, 99))
-    fk_diff = max(float(np.abs(pin.pose(q) - np.asarray(jk.fk(robot, q))).max()) for q in qs)
-    if fk_diff > 1e-9:
-        raise RuntimeError(f"Pinocchio's model disagrees with jaxkin's fk by {fk_diff:.1e}")
+    qs = check_configurations(robot)
+    poses = np.stack([pin.pose(q) for q in qs])
+    fk_diff = agreeing("Pinocchio's model", fk_disagreement(robot, qs, poses))
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     out = run_pinocchio(pin.model, pin.fid, Ts, mid[None], lo, hi, budget_s)
-    n = out["measured_targets"]
-    return dict(q=out["q"][:n], n=n, total_s=out["total_s"] * n / len(Ts), fk_max_abs_diff=fk_diff)
+    return dict(**measured(out, len(Ts)), fk_max_abs_diff=fk_diff)
 
 
-def run_pk(src: RobotSource, robot, Ts, mid) -> dict[str, Any]:
-    import pytorch_kinematics as pk
+def run_pk_mid(src: RobotSource, robot, Ts, mid) -> dict[str, Any]:
     import torch
 
-    with _quiet():
-        chain = pk.build_serial_chain_from_urdf(src.urdf.encode(), src.tip).to(dtype=torch.float64)
+    with quiet():
+        chain = pk_chain(src.urdf, src.tip)
     if tuple(chain.get_joint_parameter_names()) != tuple(robot.joint_names):
         raise RuntimeError("pytorch_kinematics' joint order differs from jaxkin's")
     lo = np.where(np.isfinite(robot.lower), robot.lower, -math.pi)
     hi = np.where(np.isfinite(robot.upper), robot.upper, math.pi)
-    qs = np.asarray(jk.sample_configurations(robot, 5, 99))
+    qs = check_configurations(robot)
     m = chain.forward_kinematics(torch.tensor(qs)).get_matrix().numpy()
-    fk_diff = float(np.abs(m - np.asarray(jax.vmap(lambda q: jk.fk(robot, q))(qs))).max())
-    ik = pk.PseudoInverseIK(
-        chain,
-        retry_configs=torch.tensor(mid[None], dtype=torch.float64),
-        joint_limits=torch.tensor(np.stack([lo, hi], 1), dtype=torch.float64),
-        max_iterations=100,
-        pos_tolerance=TOL,
-        rot_tolerance=TOL,
-        early_stopping_any_converged=True,
-    )
-    target = pk.Transform3d(matrix=torch.tensor(Ts, dtype=torch.float64))
-    sol, elapsed = timed(lambda: ik.solve(target))
-    return dict(q=sol.solutions.numpy()[:, 0], n=len(Ts), total_s=elapsed, fk_max_abs_diff=fk_diff)
+    fk_diff = fk_disagreement(robot, qs, m)
+    res = run_pk(chain, Ts, mid[None], lo, hi, max_iterations=100, tol=TOL)
+    return dict(q=res["q"], n=len(Ts), total_s=res["total_s"], fk_max_abs_diff=fk_diff)
 
 
 # ---------------------------------------------------------------------------- protocols
 def trac_ik_protocol(name: str, src: RobotSource, args) -> list[dict[str, Any]]:
     robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=np.float64, name=name)
     q_star = np.asarray(jk.sample_configurations(robot, args.n, TARGET_SEED))
-    Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(q_star))
+    Ts = target_poses(robot, q_star)
     mid = mid_seed(robot)
     judge = Judge(robot, Ts)
     rows = []
@@ -310,13 +256,13 @@ def trac_ik_protocol(name: str, src: RobotSource, args) -> list[dict[str, Any]]:
         rows.append(row)
 
     log(f"{name}: jaxkin, {args.n} targets")
-    add("jaxkin", run_jaxkin(robot, Ts, mid, args.repeats))
+    add("jaxkin", jaxkin_row(robot, Ts, mid, args.repeats))
     peer_Ts = Ts[: args.peer_targets]
     peers = {
         "TRAC-IK (pytracik)": lambda: run_tracik(src, robot, peer_Ts, mid, args.budget),
         "Robotics Toolbox ikine_LM": lambda: run_rtb(src, robot, peer_Ts, mid, args.budget),
         "Pinocchio docs DLS loop": lambda: run_pin(src, robot, peer_Ts, mid, args.budget),
-        "pytorch_kinematics PseudoInverseIK": lambda: run_pk(src, robot, peer_Ts, mid),
+        "pytorch_kinematics PseudoInverseIK": lambda: run_pk_mid(src, robot, peer_Ts, mid),
     }
     for solver, run in peers.items():
         if solver.split()[0].lower() in args.skip:
@@ -333,20 +279,20 @@ def gpu_protocol(args) -> list[dict[str, Any]]:
     robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=np.float64, name="panda")
     n = args.gpu_n
     q_star = np.asarray(jk.sample_configurations(robot, n, GPU_SEED))
-    Ts = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(q_star))
+    Ts = target_poses(robot, q_star)
     starts = np.asarray(jk.sample_configurations(robot, 16, GPU_SEED + 1))
     judge = Judge(robot, Ts)
     rows = []
     for label, kw in (("defaults (tol 1e-10)", {}), ("tol=1e-4", {"tol": 1e-4})):
         log(f"GPU protocol: jaxkin {label}")
-        res = run_jaxkin(robot, Ts, starts[0], args.repeats, seeds=starts[1:], **kw)
+        res = jaxkin_row(robot, Ts, starts[0], args.repeats, seeds=starts[1:], **kw)
         q = res.pop("q")
         res.pop("n")
         rows.append(
             dict(
                 setting=label,
                 n=n,
-                success=float(judge.gpu_success(q).mean()),
+                success=float(judge.norm_success(q, GPU_POS, GPU_ROT).mean()),
                 success_1e9=float(judge.success(q, PRECISE).mean()),
                 **res,
             )
@@ -354,98 +300,7 @@ def gpu_protocol(args) -> list[dict[str, Any]]:
     return rows
 
 
-# ---------------------------------------------------------------------------- report
-def _pct(x: float) -> str:
-    return f"{100 * x:.2f}%"
-
-
-def tables(res: dict[str, Any]) -> str:
-    m = res["machine"]
-    la, lb = res["load_average_before"], res["load_average_after"]
-    out = [
-        f"`python3 -m bench.ik_protocols{' --quick' if res['quick'] else ''}` ({res['date']}; "
-        f"{', '.join(m['cpu_model'])}, {m['cpus_usable']} cores; load "
-        f"average (1, 5, 15 min) {', '.join(f'{x:.1f}' for x in la)} before, "
-        f"{', '.join(f'{x:.1f}' for x in lb)} after; jax {m['jax']}, numpy {m['numpy']}, "
-        f"pytracik {res['versions']['pytracik']}, roboticstoolbox-python {m['roboticstoolbox']}, "
-        f"Pinocchio {m['pinocchio']}, pytorch-kinematics {m['pytorch_kinematics']}, torch "
-        f"{m['torch']}; total {res['wall_s']:.0f} s).",
-        "",
-        f"**TRAC-IK's protocol**: {res['n']:,} random reachable targets per arm, one seed at "
-        "mid-limits, success = every pose-error component <= 1e-5 (m, rad) and within the "
-        f"limits. Peers on the first {res['peer_targets']:,} targets, stopped after "
-        f"{res['budget']:.0f} s per arm (column *targets*). Time = wall time per target "
-        "(jaxkin: one batched call, steady state; its first call, compile included, apart). "
-        "The 1e-9 column judges the same answers at 1e-9 per component (float64).",
-        "",
-    ]
-    rows = []
-    for r in res["trac_ik"]:
-        if "error" in r:
-            rows.append([r["arm"], str(r["dof"]), r["solver"], "-", "-", "-", "-", r["error"]])
-            continue
-        first = f"first call {r['first_call_s']:.1f} s" if "first_call_s" in r else ""
-        rows.append(
-            [
-                r["arm"],
-                str(r["dof"]),
-                r["solver"],
-                f"{r['n']:,}",
-                _pct(r["success"]),
-                _pct(r["success_1e9"]),
-                f"{r['mean_time_per_target_s'] * 1e3:.3g}",
-                first,
-            ]
-        )
-    out.append(
-        markdown_table(
-            [
-                "arm",
-                "DOF",
-                "solver",
-                "targets",
-                "success 1e-5",
-                "success 1e-9",
-                "ms / target",
-                "note",
-            ],
-            rows,
-            "lrlrrrrl",
-        )
-    )
-    if not res.get("gpu"):
-        return "\n".join([*out, "", "cuRobo / PyRoki protocol: not run (the run was stopped)."])
-    out += [
-        "",
-        f"**cuRobo / PyRoki protocol** (Franka Panda, {res['gpu'][0]['n']:,} targets, 16 seeds, "
-        "success at 5 mm / 0.05 rad). jaxkin on this 2-core CPU; PyRoki and cuRobo are their "
-        "published figures on an RTX 4090 GPU, **different hardware, not measured here**:",
-        "",
-    ]
-    grows = [
-        [
-            f"jaxkin, {r['setting']} (this CPU)",
-            _pct(r["success"]),
-            _pct(r["success_1e9"]),
-            f"{r['total_s'] * 1e3 * 1000 / r['n']:.1f}",
-            f"{r['first_call_s']:.1f}",
-        ]
-        for r in res["gpu"]
-    ]
-    grows += [
-        [f"{k} (published, RTX 4090)", "-", "-", f"{v * 1e3:.1f}", "-"]
-        for k, v in PUBLISHED_GPU.items()
-    ]
-    out.append(
-        markdown_table(
-            ["solver", "success", "success 1e-9", "ms per 1,000 targets", "first call s"],
-            grows,
-            "lrrrr",
-        )
-    )
-    return "\n".join(out)
-
-
+# ---------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="300 targets per arm, peers on 50")
@@ -466,17 +321,7 @@ def main(argv: list[str] | None = None) -> int:
         args.n, args.peer_targets, args.budget, args.gpu_n, args.repeats = 300, 50, 5.0, 200, 1
     args.skip = [s.lower() for s in args.skip]
     if args.from_json is not None:
-        import json
-
-        res = json.loads(args.from_json.read_text())
-        res.setdefault("load_average_after", res["load_average_before"])
-        res.setdefault("wall_s", math.nan)
-        text = tables(res)
-        print(text)
-        if args.write_md:
-            replace_section(
-                HERE / "IK.md", text, "<!-- protocols:start -->", "<!-- protocols:end -->"
-            )
+        report(load(args.from_json), args.write_md)
         return 0
     jax.config.update("jax_enable_x64", True)
     warnings.simplefilter("ignore")
@@ -513,16 +358,10 @@ def main(argv: list[str] | None = None) -> int:
     res["load_average_after"] = os.getloadavg()
     res["wall_s"] = time.perf_counter() - t0
     write_json(out, res)
-    text = tables(res)
-    print(text)
-    if args.write_md:
-        replace_section(HERE / "IK.md", text, "<!-- protocols:start -->", "<!-- protocols:end -->")
+    report(res, args.write_md)
     log(f"wrote {out}")
     return 0
 
 
 if __name__ == "__main__":
-    rc = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(rc)
+    exit_without_teardown(main())

@@ -283,7 +283,7 @@ class Peer:
 
 
 @contextlib.contextmanager
-def _quiet():
+def quiet():
     """Silence a library's Python-level chatter (pytorch_kinematics' URDF parser warns about
     every attribute it does not know)."""
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
@@ -300,7 +300,7 @@ class TorchKinematics(Peer):
         self.torch = torch
         self.tdtype = {"float32": torch.float32, "float64": torch.float64}[dtype]
         self.dtype = dtype
-        with _quiet():
+        with quiet():
             chain = pk.build_serial_chain_from_urdf(src.urdf.encode(), src.tip)
         self.chain = chain.to(dtype=self.tdtype)
         names = tuple(self.chain.get_joint_parameter_names())
@@ -504,7 +504,7 @@ class RoboticsToolbox(Peer):
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / f"{src.name}.urdf"
             path.write_text(src.urdf)
-            with warnings.catch_warnings(), _quiet():
+            with warnings.catch_warnings(), quiet():
                 warnings.simplefilter("ignore")
                 robot = rtb.Robot.URDF(str(path))
         self.ets = robot.ets(end=src.tip)

@@ -20,7 +20,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import jax
 import numpy as np
@@ -257,6 +257,23 @@ def replace_section(path: Path, body: str, start: str, end: str) -> None:
     head, rest = text.split(start, 1)
     _, tail = rest.split(end, 1)
     path.write_text(f"{head}{start}\n{body}\n{end}{tail}")
+
+
+def print_section(text: str, write: bool, path: Path, start: str, end: str) -> None:
+    """Print a generated section and, if ``write``, put it into ``path`` between the markers
+    ``start`` and ``end`` (:func:`replace_section`)."""
+    print(text)
+    if write:
+        replace_section(path, text, start, end)
+
+
+def exit_without_teardown(rc: int) -> NoReturn:
+    """Flush stdout and stderr and end the process with status ``rc``, skipping the
+    interpreter's teardown: the Robotics Toolbox's nanobind extension otherwise prints pages of
+    "leaked instance" warnings at exit. Call it only once everything is written."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(rc)
 
 
 def write_json(path: Path, obj: Any) -> None:
