@@ -10,7 +10,7 @@
   ``--configurations``) and computes for each, from one forward pass, the hand-built geometric
   Jacobian, the twist ``J @ qd``, the analytical Jacobian with its representation margin and the
   singular values of ``J``, in compiled chunks (:func:`jaxkin.batch.chunked_map`), streaming them
-  to an ``.npz`` or ``.csv`` file (:class:`jaxkin.batch.ResultWriter`); the first
+  to an ``.npz`` or ``.csv`` file (:class:`jaxkin.io.ResultWriter`); the first
   ``CHECK_ROWS`` configurations are also checked against autodiff (``jax.jacfwd``). Prints a
   summary.
 
@@ -34,43 +34,32 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import math
 import os
 import pathlib
 import re
 import sys
-import zipfile
-import zlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 from xml.parsers import expat
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxkin as jk
 
-from .batch import MapStats, ProgressBar, ResultWriter, chunked_map
-from .jacobians import REFERENCES, change_reference
-from .representations import (
-    REPRESENTATIONS,
-    analytical_from_geometric,
-    from_matrix,
-    representation_margin,
-)
+from .batch import MapStats, ProgressBar, chunked_map
+from .io import MAX_INPUT_BYTES, ResultWriter, csv_record, read_configurations
+from .jacobians import REFERENCES
+from .representations import REPRESENTATIONS
+from .sampling import SAMPLE_BLOCK, sample_rows
+from .velocity import velocity_results
 
 __all__ = [
-    "SampledRows",
     "format_jacobian",
     "load_robot",
     "main",
-    "read_configurations",
-    "results_kernel",
-    "sample_rows",
-    "velocity_kernel",
 ]
 
 PROGRESS_MIN_N = 200_000
@@ -81,7 +70,6 @@ CLI_CHUNK_SIZE = 4096
 CHECK_TOL = {"float64": 1e-10, "float32": 1e-4}
 CHECK_ROWS = 1000  # configurations checked against autodiff (jax.jacfwd)
 DEFAULT_N = 100_000
-SAMPLE_BLOCK = 65536  # rows drawn per random key (fold_in(key, block))
 NORM_SAMPLE = 1 << 24  # twist norms kept for the median and p99 (every k-th row beyond)
 # Caps: beyond them a run would take days, exhaust memory or print nonsense.
 MAX_N = 100_000_000
@@ -93,10 +81,6 @@ XACRO_SUFFIX = ".xacro"
 # Names with these prefixes are robots of jk.robots (example-robot-data, MJCF packages) unless a
 # file of that name exists: a mistyped one gets the library's suggestions, not "no such file".
 NAME_PREFIXES = ("erd/", "mjcf/")
-# Configurations input (--configurations): the most bytes read from standard input, and the most
-# a used .npz member may declare (uncompressed, and as its .npy header's shape x itemsize).
-MAX_INPUT_BYTES = 1 << 30
-STDIN_BLOCK = 1 << 20  # bytes per read from standard input
 SNIFF_BYTES = 1 << 16  # bytes of a robot file read to find its root element (URDF or MJCF)
 OUTPUT_FORMATS = ("npz", "csv")
 
@@ -745,110 +729,6 @@ def _root_tag(path: pathlib.Path) -> str | None:
 
 
 # ---------------------------------------------------------------------- velocities
-class SampledRows:
-    """``(n, dof)`` random rows drawn block by block when read, never all at once.
-
-    Block ``b`` (``SAMPLE_BLOCK`` rows) is ``draw(b)``, a function of the block index only, so a
-    row depends on the seed and its index, not on ``n`` or the chunk size. Reading is by slices
-    (``rows[start:stop]``, a numpy array), as :func:`jaxkin.batch.chunked_map` does; the last
-    block read is kept, so reading in order draws each block once.
-    """
-
-    def __init__(self, n: int, dof: int, dtype: Any, draw: Callable[[int], Any], start: int = 0):
-        self.shape = (n - start, dof)
-        self.dtype = np.dtype(dtype)
-        self._n, self._draw, self._start = n, draw, start
-        self._cache: tuple[int, np.ndarray] | None = None
-
-    def __len__(self) -> int:
-        return self.shape[0]
-
-    def tail(self, k: int) -> SampledRows:
-        """The rows from ``k`` on."""
-        return SampledRows(self._n, self.shape[1], self.dtype, self._draw, self._start + k)
-
-    def _block(self, b: int) -> np.ndarray:
-        if self._cache is None or self._cache[0] != b:
-            self._cache = (b, np.asarray(self._draw(b), dtype=self.dtype))
-        return self._cache[1]
-
-    def __getitem__(self, rows: slice) -> np.ndarray:
-        if not isinstance(rows, slice) or rows.step not in (None, 1):
-            raise TypeError("SampledRows reads contiguous slices only, e.g. rows[0:100]")
-        start, stop, _ = rows.indices(self.shape[0])
-        lo, hi = start + self._start, max(stop, start) + self._start
-        blocks = range(lo // SAMPLE_BLOCK, -(-hi // SAMPLE_BLOCK))
-        parts = [
-            self._block(b)[max(lo - b * SAMPLE_BLOCK, 0) : hi - b * SAMPLE_BLOCK] for b in blocks
-        ]
-        return np.concatenate([np.empty((0, self.shape[1]), self.dtype), *parts])
-
-
-def sample_rows(
-    robot: jk.Robot, n: int, seed: int, qd_scale: float, dtype: Any
-) -> tuple[SampledRows, SampledRows]:
-    """``(q, qd)``, each ``(n, dof)`` :class:`SampledRows` of ``dtype``: ``q`` from
-    :func:`jaxkin.sample_configurations` (within the limits; unbounded or absurd limits in its
-    documented finite box), ``qd`` uniform in ``[-qd_scale, qd_scale]``; block ``b`` of each
-    from ``jax.random.fold_in`` of the seed's key."""
-    key_q, key_qd = jax.random.split(jax.random.key(seed))
-
-    def draw_q(b: int) -> jax.Array:
-        key = jax.random.fold_in(key_q, b)
-        return jk.sample_configurations(robot, SAMPLE_BLOCK, key, dtype=dtype)
-
-    def draw_qd(b: int) -> jax.Array:
-        key, shape = jax.random.fold_in(key_qd, b), (SAMPLE_BLOCK, robot.dof)
-        return jax.random.uniform(key, shape, dtype, minval=-qd_scale, maxval=qd_scale)
-
-    return SampledRows(n, robot.dof, dtype, draw_q), SampledRows(n, robot.dof, dtype, draw_qd)
-
-
-def results_kernel(robot: jk.Robot, frame: int | str | None, reference: str, representation: str):
-    """The per-configuration function ``f(q, qd) -> dict`` that ``velocities`` writes, from one
-    forward pass (:func:`jaxkin.jacobians.jacobian_pass`).
-
-    Output shapes for one configuration: ``q``, ``qd`` (dof,) as given; ``J`` (6, dof) hand-built
-    geometric Jacobian at ``reference``; ``twist`` (6,) ``= J @ qd``, ``[v; omega]``; ``Ja``
-    (6, dof) analytical Jacobian ``d[p; phi]/dq`` (``blkdiag(I, B(phi)^-1)`` times the
-    world-aligned ``J``) and ``margin`` () its representation margin; ``sigma`` (min(6, dof),)
-    singular values of ``J``, descending.
-    """
-    f = robot.frame_index(frame)
-
-    def per_config(q, qd):
-        g = jk.jacobians.jacobian_pass(robot, q, f, None, "world_aligned")
-        J_wa = g.matrix()
-        J = J_wa if reference == "world_aligned" else change_reference(
-            J_wa, g.pose(), "world_aligned", reference
-        )  # fmt: skip
-        phi = from_matrix(g.rotation(), representation)
-        return {
-            "q": q,
-            "qd": qd,
-            "twist": g.times(qd) if reference == "world_aligned" else J @ qd,
-            "J": J,
-            "Ja": analytical_from_geometric(J_wa, phi, representation),
-            "margin": representation_margin(phi, representation),
-            "sigma": jnp.linalg.svd(J, compute_uv=False),
-        }
-
-    return per_config
-
-
-def velocity_kernel(robot: jk.Robot, frame: int | str | None, reference: str, representation: str):
-    """:func:`results_kernel` plus ``jac_err`` () ``= max |J - jk.jacobian_fwd(...)|``, the
-    independent autodiff check that ``velocities`` runs on the first configurations."""
-    results = results_kernel(robot, frame, reference, representation)
-
-    def per_config(q, qd):
-        out = results(q, qd)
-        J_ad = jk.jacobian_fwd(robot, q, frame=frame, reference=reference)
-        return {**out, "jac_err": jnp.max(jnp.abs(out["J"] - J_ad))}
-
-    return per_config
-
-
 @contextlib.contextmanager
 def _x64(enabled: bool) -> Iterator[None]:
     """Turn ``jax_enable_x64`` on for this command when float64 is asked; restore it after."""
@@ -946,7 +826,10 @@ def _velocity_inputs(args: argparse.Namespace, robot: jk.Robot):
             *sample_rows(robot, args.n or DEFAULT_N, args.seed, args.qd_scale, dtype),
             (None, False),
         )
-    q, qd = read_configurations(args.configurations, robot, dtype)
+    try:
+        q, qd = read_configurations(args.configurations, robot, dtype)
+    except jk.JaxkinError as e:  # it names the file: reported as it is, no flags to translate
+        raise UsageError(str(e)) from None
     if qd is None:
         return (
             q,
@@ -979,7 +862,7 @@ def _output_choice(args: argparse.Namespace, label: str, n: int) -> tuple[str | 
 
 def _open_writer(args, robot: jk.Robot, frame: str, path: str, fmt: str, n: int) -> ResultWriter:
     """The output, opened before any work so that a bad path fails first."""
-    kernel = results_kernel(robot, frame, args.reference, args.representation)
+    kernel = velocity_results(robot, frame, args.reference, args.representation)
     row = jax.ShapeDtypeStruct((robot.dof,), np.dtype(args.dtype))
     shapes = jax.eval_shape(kernel, row, row)
     fields = {k: (s.shape, s.dtype) for k, s in shapes.items()}
@@ -1014,7 +897,7 @@ def _run(args, robot: jk.Robot, frame: str, q, qd, summary: _Summary) -> list[Ma
     """The autodiff check on the first ``CHECK_ROWS`` configurations (their results written
     too), then the one-pass kernel on the rest; every chunk goes through ``summary``."""
     n, k = len(q), min(len(q), CHECK_ROWS)
-    check = velocity_kernel(robot, frame, args.reference, args.representation)
+    check = velocity_results(robot, frame, args.reference, args.representation, check=True)
     _, first = chunked_map(
         check, q[:k], qd[:k], chunk_size=args.chunk_size, out=summary, return_stats=True
     )
@@ -1028,7 +911,7 @@ def _run(args, robot: jk.Robot, frame: str, q, qd, summary: _Summary) -> list[Ma
         return [first]
     show = n >= PROGRESS_MIN_N if args.progress is None else args.progress
     bar = ProgressBar(n - k, "velocities", unit="cfg", enabled=show, force=args.progress is True)
-    fn = results_kernel(robot, frame, args.reference, args.representation)
+    fn = velocity_results(robot, frame, args.reference, args.representation)
     rest = [a[k:] if isinstance(a, np.ndarray) else a.tail(k) for a in (q, qd)]
     _, stats = chunked_map(
         fn, *rest, chunk_size=args.chunk_size, progress=bar, out=summary, return_stats=True
@@ -1126,248 +1009,6 @@ def _source_line(args: argparse.Namespace, robot: jk.Robot, q: Any, source) -> s
     return f"{len(q):,} from {name} ({qd_text}; {outside:,} outside the joint limits)"
 
 
-# ---------------------------------------------------------------------- configuration files
-def read_configurations(path: str, robot: jk.Robot, dtype: Any):
-    """``(q, qd)`` from a .npz (arrays ``q``, optional ``qd``) or CSV file, or from standard
-    input for ``path="-"`` (npz if it starts like a zip, else CSV); ``qd`` may be None.
-
-    Shapes (N, dof) in ``robot.joint_names`` order; see ``jaxkin velocities --help`` for the
-    CSV layout. Every problem with the file is a :class:`UsageError` naming it.
-    """
-    if path == "-":
-        data = _read_stdin()
-        if data[:2] == b"PK":
-            q, qd = _read_npz(io.BytesIO(data), "standard input", robot)
-        else:
-            text = io.StringIO(data.decode("utf-8-sig", errors="replace"), newline="")
-            q, qd = _read_csv(text, "standard input", robot)
-    else:
-        q, qd = _read_file(pathlib.Path(path), robot)
-    for name, a in (("q", q), ("qd", qd)):
-        if a is None:
-            continue
-        bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
-        if bad.size:
-            raise UsageError(
-                f"{path}: {name} of configuration {int(bad[0])} is not finite: {a[bad[0]].tolist()}"
-            )
-    if len(q) == 0:
-        raise UsageError(f"{path} holds no configurations")
-    return q.astype(dtype), None if qd is None else qd.astype(dtype)
-
-
-def _read_stdin() -> bytes:
-    """Standard input, read block by block: at most ``MAX_INPUT_BYTES`` (an endless stream is
-    refused once it passes the cap, never held whole)."""
-    stream = getattr(sys.stdin, "buffer", sys.stdin)
-    blocks, size = [], 0
-    while size <= MAX_INPUT_BYTES:
-        block = stream.read(min(STDIN_BLOCK, MAX_INPUT_BYTES + 1 - size))
-        if not block:
-            break
-        block = block.encode() if isinstance(block, str) else block
-        blocks.append(block)
-        size += len(block)
-    if size > MAX_INPUT_BYTES:
-        raise UsageError(
-            f"standard input holds more than {_bytes(MAX_INPUT_BYTES)} (the cap on configurations "
-            "read, MAX_INPUT_BYTES); pass a file (--configurations PATH: a CSV up to the cap, an "
-            ".npz whose q and qd are each up to it) or split the input"
-        )
-    return b"".join(blocks)
-
-
-def _bytes(n: int) -> str:
-    """``n`` bytes in a unit that fits (``1 GiB``, ``12.5 MiB``, ``300 bytes``)."""
-    for unit, size in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
-        if n >= size:
-            return f"{n / size:,.1f}".removesuffix(".0") + f" {unit}"
-    return f"{n:,} bytes"
-
-
-def _read_file(p: pathlib.Path, robot: jk.Robot):
-    if not p.is_file():
-        raise UsageError(
-            f"configurations file {p} " + ("is not a file" if p.exists() else "does not exist")
-        )
-    try:
-        if p.suffix.lower() == ".npz":
-            return _read_npz(p, p, robot)
-        size = p.stat().st_size
-        if size > MAX_INPUT_BYTES:
-            raise UsageError(
-                f"configurations file {p} is {_bytes(size)}, over the {_bytes(MAX_INPUT_BYTES)} "
-                "cap on a CSV file (MAX_INPUT_BYTES); split it, or save q (and qd) with "
-                "numpy.savez"
-            )
-        # utf-8-sig: Excel's byte order mark; newline="": quoted fields may hold line breaks
-        with open(p, encoding="utf-8-sig", errors="replace", newline="") as f:
-            return _read_csv(f, p, robot)
-    except OSError as e:
-        raise UsageError(f"cannot read {p}: {e.strerror or e}") from None
-
-
-def _joint_shape_error(path, what: str, got: tuple, robot: jk.Robot) -> UsageError:
-    return UsageError(
-        f"{path}: {what} has shape {got}; robot {robot.name!r} has {robot.dof} joints "
-        f"({', '.join(robot.joint_names)}), so it must be (N, {robot.dof})"
-    )
-
-
-def _read_npz(source: Any, p: Any, robot: jk.Robot):
-    """``(q, qd or None)`` from the members ``q`` and ``qd`` of an .npz; no other member is
-    read, and each used one is sized (:func:`_npz_member`) before it is decompressed."""
-    if not zipfile.is_zipfile(source):
-        raise UsageError(f"{p} is not an .npz file (numpy.savez writes one); or use a .csv file")
-    try:
-        with np.load(source, allow_pickle=False) as f:
-            if "q" not in f.files:
-                raise UsageError(
-                    f"{p} has no array 'q' (it has {sorted(f.files) or 'none'}); save q of shape "
-                    "(N, dof)"
-                )
-            arrays = {k: _npz_member(f, k, p) for k in ("q", "qd") if k in f.files}
-    # zlib.error: corrupt data; RuntimeError: an encrypted member; NotImplementedError: a
-    # compression method zipfile lacks
-    except (ValueError, zipfile.BadZipFile, EOFError, zlib.error, RuntimeError,
-            NotImplementedError) as e:  # fmt: skip
-        raise UsageError(f"cannot read {p} as .npz: {e}") from None
-    out = []
-    for name in ("q", "qd"):
-        a = arrays.get(name)
-        if a is None:
-            out.append(None)
-            continue
-        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-            raise UsageError(f"{p}: {name} must hold numbers, got dtype {a.dtype}")
-        a = a.astype(np.float64)
-        if a.ndim == 1:
-            a = a[None]
-        if a.ndim != 2 or a.shape[1] != robot.dof:
-            raise _joint_shape_error(p, name, arrays[name].shape, robot)
-        out.append(a)
-    if out[1] is not None and out[1].shape != out[0].shape:
-        raise UsageError(
-            f"{p}: qd has shape {out[1].shape} but q has {out[0].shape}; they must match"
-        )
-    return out[0], out[1]
-
-
-def _npz_member(f: Any, key: str, p: Any) -> np.ndarray:
-    """The array ``key`` of the open .npz ``f``, read only when its declared sizes fit: the
-    zip's uncompressed size of the member and its .npy header's shape x itemsize, each at most
-    ``MAX_INPUT_BYTES`` (numpy allocates what the header declares before reading)."""
-    member = f"{key}.npy" if f"{key}.npy" in f.zip.namelist() else key
-    declared = f.zip.getinfo(member).file_size
-    with f.zip.open(member) as fp:
-        version = np.lib.format.read_magic(fp)
-        header = (
-            np.lib.format.read_array_header_1_0
-            if version == (1, 0)
-            else np.lib.format.read_array_header_2_0
-        )
-        shape, _, dtype = header(fp)
-    nbytes = math.prod(shape) * dtype.itemsize
-    if max(declared, nbytes) > MAX_INPUT_BYTES:
-        raise UsageError(
-            f"{p}: array {key!r} declares {_bytes(max(declared, nbytes))} (shape {shape}, dtype "
-            f"{dtype}), over the {_bytes(MAX_INPUT_BYTES)} cap on configurations read "
-            "(MAX_INPUT_BYTES); split the configurations into several files"
-        )
-    if nbytes > declared:
-        raise UsageError(
-            f"{p}: array {key!r} declares shape {shape} ({_bytes(nbytes)}) but its member holds "
-            f"{_bytes(declared)}; the file is corrupt"
-        )
-    return f[key]
-
-
-def _read_csv(f: Any, p: Any, robot: jk.Robot):
-    """Rows of a CSV text stream (:func:`jaxkin.batch.csv_records`: the ``csv`` module, so
-    quoted fields as R and jaxkin write them; ``#`` comment lines and blank lines between
-    records): ``(q, qd or None)``. Numbers may be surrounded by blanks."""
-    header, rows = None, []
-    try:
-        for lineno, fields in jk.batch.csv_records(f, source=p):
-            try:
-                rows.append((lineno, [float(x) for x in fields]))
-            except ValueError:
-                if header is None and not rows:
-                    header = fields
-                    continue
-                raise UsageError(
-                    f"{p} line {lineno}: not a row of numbers: {','.join(fields)[:80]!r}"
-                ) from None
-    except jk.JaxkinError as e:
-        raise UsageError(str(e)) from None
-    if header and header[0].strip() == "":  # R's write.csv: a first column of row names
-        header, rows = header[1:], [(i, r[1:]) for i, r in rows]
-    order = None if header is None else _csv_columns(header, p, robot)
-    width = None if header is None else len(header)
-    table = []
-    for lineno, values in rows:
-        if width is not None and len(values) != width:
-            raise UsageError(f"{p} line {lineno}: {len(values)} values, the header has {width}")
-        if width is None and len(values) not in (robot.dof, 2 * robot.dof):
-            raise UsageError(
-                f"{p} line {lineno}: {len(values)} values; robot {robot.name!r} has {robot.dof} "
-                f"joints ({', '.join(robot.joint_names)}): give {robot.dof} (q) or "
-                f"{2 * robot.dof} (q, qd)"
-            )
-        table.append([values[k] for k in order] if order is not None else values)
-    if not table:
-        raise UsageError(f"{p} holds no configurations")
-    if width is None and len({len(r) for r in table}) > 1:
-        raise UsageError(f"{p}: rows mix {robot.dof} and {2 * robot.dof} values; use one layout")
-    a = np.array(table, dtype=np.float64)
-    if a.shape[1] == 2 * robot.dof:
-        return a[:, : robot.dof], a[:, robot.dof :]
-    return a, None
-
-
-def _csv_columns(header: list[str], p: Any, robot: jk.Robot) -> list[int]:
-    """Column indices of q (then qd, if given) in joint order, from a header line: joint names
-    or ``q_<joint>``, and optionally ``qd_<joint>``. A column matches as written, else with
-    surrounding blanks removed; where every column reads as ``q_<joint>`` or ``qd_<joint>``
-    (as jaxkin writes them), that reading wins over a joint named like the column."""
-    names = list(robot.joint_names)
-
-    def prefixed(h: str) -> tuple[str, str] | None:
-        if h.startswith("qd_") and h[3:] in names:
-            return ("qd", h[3:])
-        return ("q", h[2:]) if h.startswith("q_") and h[2:] in names else None
-
-    def named(h: str) -> tuple[str, str] | None:
-        if h.startswith("qd_") and h[3:] in names:
-            return ("qd", h[3:])
-        return ("q", h) if h in names else prefixed(h)
-
-    read = prefixed if all(prefixed(h) or prefixed(h.strip()) for h in header) else named
-    columns: dict[tuple[str, str], int] = {}
-    for k, h in enumerate(header):
-        key = read(h) or read(h.strip())
-        if key is None:
-            raise UsageError(
-                f"{p}: unknown column {h!r}; columns are joint names {names} (or q_<joint>) "
-                "and optionally qd_<joint>"
-            )
-        if key in columns:
-            raise UsageError(
-                f"{p}: column {h!r} duplicates column {header[columns[key]]!r} (both give "
-                f"{key[0]} of joint {key[1]!r}); keep one"
-            )
-        columns[key] = k
-    missing = [n for n in names if ("q", n) not in columns]
-    if missing:
-        raise UsageError(f"{p}: no column for joint(s) {missing} of robot {robot.name!r}")
-    has_qd = any(k[0] == "qd" for k in columns)
-    if has_qd and not all(("qd", n) in columns for n in names):
-        raise UsageError(f"{p}: give qd_<joint> for every joint {names} or for none")
-    return [columns[("q", n)] for n in names] + (
-        [columns[("qd", n)] for n in names] if has_qd else []
-    )
-
-
 # ---------------------------------------------------------------------- jacobian
 def cmd_jacobian(args: argparse.Namespace) -> int:
     with _x64(args.dtype == "float64"):
@@ -1388,7 +1029,7 @@ def cmd_jacobian(args: argparse.Namespace) -> int:
         print(json.dumps(_jacobian_record(J, robot, frame, q, args, kind), indent=1))
     elif args.format == "csv":
         rows = _row_labels(args.analytical)
-        sys.stdout.write(jk.batch.csv_record(["row", *robot.joint_names]))
+        sys.stdout.write(csv_record(["row", *robot.joint_names]))
         for label, row in zip(rows, J, strict=True):
             print(",".join([label, *(repr(float(x)) for x in row)]))
     else:

@@ -1,5 +1,9 @@
 """Random joint configurations: the one sampler used by the CLI, IK restarts, tests and benchmarks.
 
+:func:`sample_configurations` draws a batch at once; :func:`sample_rows` draws configurations and
+joint velocities block by block as they are read (:class:`SampledRows`), for batches larger than
+memory.
+
 Configurations are drawn uniformly within each joint's limits. A side of a joint's range is
 *unbounded* when it is infinite or its magnitude is at least :data:`UNBOUNDED_LIMIT` (real exported
 files carry +-1.8e308 and similar stand-ins for "no limit"). Unbounded sides are replaced by the
@@ -18,6 +22,7 @@ translations (always unbounded) uniformly in ``[-1, 1]`` metre, the prismatic bo
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -28,7 +33,15 @@ from ._checks import is_traced
 from .errors import JaxkinError
 from .model import Robot
 
-__all__ = ["UNBOUNDED_HALF_WIDTH", "UNBOUNDED_LIMIT", "sample_configurations", "sampling_bounds"]
+__all__ = [
+    "SAMPLE_BLOCK",
+    "UNBOUNDED_HALF_WIDTH",
+    "UNBOUNDED_LIMIT",
+    "SampledRows",
+    "sample_configurations",
+    "sample_rows",
+    "sampling_bounds",
+]
 
 UNBOUNDED_LIMIT = 1e6
 """A joint limit whose magnitude is at least this (radians or metres) counts as no limit."""
@@ -42,6 +55,9 @@ UNBOUNDED_HALF_WIDTH = {
 }
 """Half width of the sampled range of a joint with no limit on either side (the entries of
 free, ball and planar joints: translations in metres; their rotation entries are in [-1, 1])."""
+
+SAMPLE_BLOCK = 65536
+"""Rows drawn per random key by :func:`sample_rows` (block ``b`` from ``fold_in(key, b)``)."""
 
 
 def sampling_bounds(robot: Robot) -> tuple[Any, Any]:
@@ -129,3 +145,80 @@ def _rotations(robot: Robot, qs: jax.Array, key: Any, dt: Any) -> jax.Array:
         start = qi + 3 if kind == "free" else qi
         qs = qs.at[:, start : start + 4].set(g)
     return qs
+
+
+# ---------------------------------------------------------------------- block sampling
+class SampledRows:
+    """``(n, width)`` random rows drawn block by block when read, never all at once.
+
+    Block ``b`` (:data:`SAMPLE_BLOCK` rows) is ``draw(b)``, a function of the block index only,
+    so a row depends on ``draw`` (its seed) and its index, not on ``n`` or on how the rows are
+    read. Reading is by contiguous slices (``rows[start:stop]``, a numpy array of ``dtype``), as
+    :func:`jaxkin.batch.chunked_map` reads a row source; the last block read is kept, so
+    reading in order draws each block once. :func:`sample_rows` makes them.
+    """
+
+    def __init__(
+        self, n: int, width: int, dtype: Any, draw: Callable[[int], Any], start: int = 0
+    ) -> None:
+        self.shape = (n - start, width)
+        self.dtype = np.dtype(dtype)
+        self._n, self._draw, self._start = n, draw, start
+        self._cache: tuple[int, np.ndarray] | None = None
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def tail(self, k: int) -> SampledRows:
+        """The rows from ``k`` on (the same rows, drawn from the same blocks)."""
+        return SampledRows(self._n, self.shape[1], self.dtype, self._draw, self._start + k)
+
+    def _block(self, b: int) -> np.ndarray:
+        if self._cache is None or self._cache[0] != b:
+            self._cache = (b, np.asarray(self._draw(b), dtype=self.dtype))
+        return self._cache[1]
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        if not isinstance(rows, slice) or rows.step not in (None, 1):
+            raise TypeError("SampledRows reads contiguous slices only, e.g. rows[0:100]")
+        start, stop, _ = rows.indices(self.shape[0])
+        lo, hi = start + self._start, max(stop, start) + self._start
+        blocks = range(lo // SAMPLE_BLOCK, -(-hi // SAMPLE_BLOCK))
+        parts = [
+            self._block(b)[max(lo - b * SAMPLE_BLOCK, 0) : hi - b * SAMPLE_BLOCK] for b in blocks
+        ]
+        return np.concatenate([np.empty((0, self.shape[1]), self.dtype), *parts])
+
+
+def sample_rows(
+    robot: Robot, n: int, seed: int, qd_scale: float, dtype: Any
+) -> tuple[SampledRows, SampledRows]:
+    """``(q, qd)``: ``n`` random configurations ``(n, nq)`` and joint velocities ``(n, nv)``,
+    :class:`SampledRows` of ``dtype`` drawn :data:`SAMPLE_BLOCK` rows at a time when read (so
+    millions of them never sit in memory), as ``jaxkin velocities`` samples them.
+
+    ``q`` as :func:`sample_configurations` draws it (within the limits; unbounded sides in its
+    finite box), ``qd`` uniform in ``[-qd_scale, qd_scale]``; block ``b`` of each from
+    ``jax.random.fold_in`` of one of the two halves of ``jax.random.split(jax.random.key(seed))``.
+    A row depends on ``seed`` and its index only.
+
+    >>> import numpy as np, jaxkin as jk
+    >>> from jaxkin.sampling import sample_rows
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> q, qd = sample_rows(robot, 10**9, seed=0, qd_scale=0.5, dtype=np.float32)
+    >>> q.shape, q[5:8].shape  # a billion rows; reading three draws one block
+    ((1000000000, 2), (3, 2))
+    >>> bool(np.all(np.abs(qd[0:100]) <= 0.5))
+    True
+    """
+    key_q, key_qd = jax.random.split(jax.random.key(seed))
+
+    def draw_q(b: int) -> jax.Array:
+        key = jax.random.fold_in(key_q, b)
+        return sample_configurations(robot, SAMPLE_BLOCK, key, dtype=dtype)
+
+    def draw_qd(b: int) -> jax.Array:
+        key, shape = jax.random.fold_in(key_qd, b), (SAMPLE_BLOCK, robot.nv)
+        return jax.random.uniform(key, shape, dtype, minval=-qd_scale, maxval=qd_scale)
+
+    return SampledRows(n, robot.nq, dtype, draw_q), SampledRows(n, robot.nv, dtype, draw_qd)

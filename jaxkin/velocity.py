@@ -2,19 +2,24 @@
 
 A twist is ``V = [v; omega]`` (linear first), shape (6,). ``reference`` has the meaning of
 :mod:`jaxkin.jacobians` (``world_aligned``: velocity of the frame origin in world axes).
+:func:`velocity_results` gives the per-configuration function of everything ``jaxkin
+velocities`` reports (Jacobians, twist, representation margin, singular values), for batching.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ._checks import (
     check_point,
     check_q,
     check_reference,
+    check_robot,
     check_twist,
     check_v,
     finite_guard,
@@ -23,8 +28,14 @@ from ._checks import (
 )
 from ._jit import eager
 from .errors import JaxkinError, ShapeError
-from .jacobians import jacobian_pass
+from .jacobians import change_reference, jacobian_fwd, jacobian_pass
 from .model import Robot
+from .representations import (
+    analytical_from_geometric,
+    check_representation,
+    from_matrix,
+    representation_margin,
+)
 
 __all__ = [
     "MOTION_KINDS",
@@ -32,6 +43,7 @@ __all__ = [
     "classify_twist",
     "point_velocity",
     "twist",
+    "velocity_results",
 ]
 
 MOTION_KINDS = ("rest", "pure_translation", "pure_rotation", "general")
@@ -93,6 +105,75 @@ def point_velocity(
     q = check_q(robot, q, fn="jk.point_velocity", batch_hint=hint)
     qd = check_v(robot, qd, what="qd", fn="jk.point_velocity", batch_hint=hint)
     return twist(robot, q, qd, frame=frame, point=point)[:3]
+
+
+def velocity_results(
+    robot: Robot,
+    frame: int | str | None = None,
+    reference: str = "world_aligned",
+    representation: str = "rpy",
+    *,
+    check: bool = False,
+) -> Callable[[Any, Any], dict[str, jax.Array]]:
+    """The per-configuration function ``f(q, qd) -> dict`` of ``frame``'s velocity results, all
+    from one forward pass: what ``jaxkin velocities`` computes and writes for each row.
+
+    Made for batching (``jax.vmap``, :func:`jaxkin.batch.chunked_map`): ``robot``, ``frame``,
+    ``reference`` and ``representation`` are checked here, once; ``q`` (nq,) and ``qd`` (nv,)
+    are not checked in ``f``. The entries, for one configuration:
+
+    * ``q`` (nq,), ``qd`` (nv,): the inputs, as given;
+    * ``J`` (6, nv): the geometric Jacobian at ``reference`` (rows ``[v; omega]``, as
+      :func:`~jaxkin.geometric_jacobian`);
+    * ``twist`` (6,): ``J @ qd``, ``[v; omega]``;
+    * ``Ja`` (6, nv): the analytical Jacobian ``d[p; phi]/dq``, ``phi`` in ``representation``
+      (``blkdiag(I, B(phi)^-1)`` times the world-aligned ``J``, whatever ``reference``), and
+      ``margin`` (): its :func:`~jaxkin.representation_margin` (0 at the singularity, where
+      ``Ja`` is not finite);
+    * ``sigma`` (min(6, nv),): the singular values of ``J``, descending;
+    * with ``check=True`` also ``jac_err`` (): ``max |J - jacobian_fwd(...)|``, the largest
+      difference from the autodiff Jacobian (:func:`~jaxkin.jacobian_fwd`), an independent
+      check (a second, autodiff pass: slower).
+
+    >>> import jax, jax.numpy as jnp, jaxkin as jk
+    >>> from jaxkin.velocity import velocity_results
+    >>> robot = jk.robots.load("two_link_planar")
+    >>> f = velocity_results(robot, check=True)
+    >>> out = f(jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0]))
+    >>> sorted(out)
+    ['J', 'Ja', 'jac_err', 'margin', 'q', 'qd', 'sigma', 'twist']
+    >>> out["twist"][:2].round(6).tolist(), bool(out["jac_err"] < 1e-6)
+    ([-1.0, 1.0], True)
+    >>> jax.vmap(f)(jnp.zeros((5, 2)), jnp.ones((5, 2)))["J"].shape  # a batch of 5
+    (5, 6, 2)
+    """
+    check_robot(robot, "velocity_results")
+    check_reference(reference)
+    check_representation(representation)
+    f = robot.frame_index(frame)
+
+    def results(q: Any, qd: Any) -> dict[str, jax.Array]:
+        g = jacobian_pass(robot, q, f, None, "world_aligned")
+        J_wa = g.matrix()
+        J = J_wa if reference == "world_aligned" else change_reference(
+            J_wa, g.pose(), "world_aligned", reference
+        )  # fmt: skip
+        phi = from_matrix(g.rotation(), representation)
+        out = {
+            "q": q,
+            "qd": qd,
+            "twist": g.times(qd) if reference == "world_aligned" else J @ qd,
+            "J": J,
+            "Ja": analytical_from_geometric(J_wa, phi, representation),
+            "margin": representation_margin(phi, representation),
+            "sigma": jnp.linalg.svd(J, compute_uv=False),
+        }
+        if check:
+            J_ad = jacobian_fwd(robot, q, frame=f, reference=reference)
+            out["jac_err"] = jnp.max(jnp.abs(J - J_ad))
+        return out
+
+    return results
 
 
 def _host_side(fn: str, **inputs: Any) -> None:

@@ -1,8 +1,10 @@
 """The command line: `jaxkin velocities` end to end (in-process), its errors, atomic output."""
 
+import ast
 import collections
 import io
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -148,13 +150,15 @@ def test_float64_turns_x64_on_for_the_run_only(capsys):
 
 
 def test_check_failure_exits_1(capsys, monkeypatch, in_tmp):
-    kernel = cli.velocity_kernel
+    kernel = cli.velocity_results
 
-    def broken(*args):
-        fn = kernel(*args)
+    def broken(*args, **kwargs):
+        fn = kernel(*args, **kwargs)
+        if not kwargs.get("check"):
+            return fn
         return lambda q, qd: {**fn(q, qd), "jac_err": fn(q, qd)["jac_err"] + 1.0}
 
-    monkeypatch.setattr(cli, "velocity_kernel", broken)
+    monkeypatch.setattr(cli, "velocity_results", broken)
     code, out, err = run(capsys, "velocities", "two_link_planar", "--n", "20", "--no-output")
     assert code == 1 and "FAIL" in out and "disagree" in err
 
@@ -267,11 +271,27 @@ def test_failed_write_keeps_the_old_file(capsys, monkeypatch, in_tmp):
         self.f.write(b"PK partial")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(jk.batch._NpzFile, "append", half_written)
+    monkeypatch.setattr(jk.io._NpzFile, "append", half_written)
     assert_usage_error(capsys, "velocities", "two_link_planar", "--n", "10", "--output", "v.npz",
                        match="No space left on device")  # fmt: skip
     assert os.listdir(in_tmp) == ["v.npz"]
     assert (in_tmp / "v.npz").read_bytes() == b"previous result"
+
+
+# ---------------------------------------------------------------------- what the module holds
+def test_cli_holds_no_kernel_sampler_or_reader():
+    """The command line parses, prints and turns library errors into one-line exits: the
+    per-configuration kernel is jaxkin.velocity's, block sampling jaxkin.sampling's and the
+    configuration readers jaxkin.io's (issue 22, item 3)."""
+    tree = ast.parse(pathlib.Path(cli.__file__).read_text(encoding="utf-8"))
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not imported & {"jax.numpy", "zipfile", "zlib", "io"}, imported
+    calls = {ast.unparse(n.func) for n in ast.walk(tree) if isinstance(n, ast.Call)}
+    library = ("jnp.", "jax.jit", "jax.vmap", "jax.random.", "np.load", "jk.jacobians.")
+    assert not sorted(c for c in calls if c.startswith(library))
+    assert cli.velocity_results is jk.velocity.velocity_results
+    assert cli.sample_rows is jk.sampling.sample_rows
+    assert cli.read_configurations is jk.io.read_configurations
 
 
 # ---------------------------------------------------------------------- as a program
@@ -415,7 +435,7 @@ def test_velocities_configurations_plain_csv_and_npz(capsys, in_tmp):
     assert code == 0 and "7 from q.csv (qd uniform in [-1, 1]" in out and "seed 4" in out
     a = load(in_tmp / "a.npz")
     np.testing.assert_array_equal(a["q"], q)
-    qd_expected = cli.sample_rows(robot, 7, 4, 1.0, np.float64)[1][0:7]
+    qd_expected = jk.sampling.sample_rows(robot, 7, 4, 1.0, np.float64)[1][0:7]
     np.testing.assert_array_equal(a["qd"], qd_expected)
     qd = -q
     np.savez(in_tmp / "qqd.npz", q=q, qd=qd)
@@ -559,10 +579,11 @@ HANGING_URDF = """<?xml version="1.0"?>
 
 def test_library_sampler_block_by_block(capsys, in_tmp):
     robot = jk.robots.load("niryo_one", dtype="float64")
-    q, qd = cli.sample_rows(robot, cli.SAMPLE_BLOCK + 10, 5, 0.5, np.float64)
+    block = jk.sampling.SAMPLE_BLOCK
+    q, qd = jk.sampling.sample_rows(robot, block + 10, 5, 0.5, np.float64)
     key_q = jax.random.split(jax.random.key(5))[0]
-    second = jk.sample_configurations(robot, cli.SAMPLE_BLOCK, jax.random.fold_in(key_q, 1))
-    np.testing.assert_array_equal(q[cli.SAMPLE_BLOCK - 2 : cli.SAMPLE_BLOCK + 10][2:], second[:10])
+    second = jk.sample_configurations(robot, block, jax.random.fold_in(key_q, 1))
+    np.testing.assert_array_equal(q[block - 2 : block + 10][2:], second[:10])
     np.testing.assert_array_equal(q.tail(3)[0:4], q[3:7])
     assert np.all(np.abs(qd[0:100]) <= 0.5)
     # a row depends on the seed and its index only, not on n or the chunk size
@@ -574,7 +595,7 @@ def test_library_sampler_block_by_block(capsys, in_tmp):
 
 def test_one_forward_pass_and_bounded_check(capsys, monkeypatch, in_tmp):
     calls = {"pass": 0, "fwd": 0}
-    real_pass, real_fwd = jk.jacobians.jacobian_pass, jk.jacobian_fwd
+    real_pass, real_fwd = jk.velocity.jacobian_pass, jk.velocity.jacobian_fwd
 
     def counted_pass(*args, **kwargs):
         calls["pass"] += 1
@@ -584,10 +605,10 @@ def test_one_forward_pass_and_bounded_check(capsys, monkeypatch, in_tmp):
         calls["fwd"] += 1
         return real_fwd(*args, **kwargs)
 
-    monkeypatch.setattr(jk.jacobians, "jacobian_pass", counted_pass)
-    monkeypatch.setattr(jk, "jacobian_fwd", counted_fwd)
+    monkeypatch.setattr(jk.velocity, "jacobian_pass", counted_pass)
+    monkeypatch.setattr(jk.velocity, "jacobian_fwd", counted_fwd)
     robot = jk.robots.load("niryo_one", dtype="float64")
-    fn = cli.results_kernel(robot, None, "world", "zyz")
+    fn = jk.velocity.velocity_results(robot, None, "world", "zyz")
     jax.make_jaxpr(fn)(np.zeros(6), np.zeros(6))
     assert calls == {"pass": 1, "fwd": 0}  # J, the twist and Ja from one forward pass
     code, out, _ = run(capsys, "velocities", "--n", "1500", "--reference", "world",
@@ -631,13 +652,13 @@ def test_unbounded_limits_sampled_finite_and_frame_checks(capsys, in_tmp):
 
 
 def test_non_finite_results_fail(capsys, monkeypatch, in_tmp):
-    kernel = cli.results_kernel
+    kernel = cli.velocity_results
 
-    def overflowing(*args):
-        fn = kernel(*args)
+    def overflowing(*args, **kwargs):
+        fn = kernel(*args, **kwargs)
         return lambda q, qd: {**fn(q, qd), "twist": fn(q, qd)["twist"] * np.inf}
 
-    monkeypatch.setattr(cli, "results_kernel", overflowing)
+    monkeypatch.setattr(cli, "velocity_results", overflowing)
     code, out, err = run(capsys, "velocities", "two_link_planar", "--n", "1100", "--output",
                          "v.npz")  # fmt: skip
     assert code == 1 and "1,100 configuration(s) gave non-finite results" in err
@@ -667,7 +688,7 @@ def test_absurd_sizes_and_contradictions(capsys, argv, match):
 
 def test_output_that_cannot_fit_the_disk(capsys, monkeypatch, in_tmp):
     usage = collections.namedtuple("usage", "total used free")
-    monkeypatch.setattr(jk.batch.shutil, "disk_usage", lambda path: usage(10**6, 0, 1000))
+    monkeypatch.setattr(jk.io.shutil, "disk_usage", lambda path: usage(10**6, 0, 1000))
     assert_usage_error(capsys, "velocities", "--n", "100", "--output", "v.npz",
                        match="has 1.0 kB free")  # fmt: skip
     assert os.listdir(in_tmp) == []
@@ -706,13 +727,13 @@ def test_csv_from_excel_r_stdin_and_duplicates(capsys, monkeypatch, in_tmp):
 def test_streams_results_to_disk(capsys, monkeypatch, in_tmp):
     """Results go to the file chunk by chunk: no chunk handed to the writer exceeds the chunk
     size, and chunked_map never returns the whole results."""
-    sizes, real = [], jk.batch.ResultWriter.append
+    sizes, real = [], jk.io.ResultWriter.append
 
     def spy(self, rows):
         sizes.append(len(rows["q"]))
         return real(self, rows)
 
-    monkeypatch.setattr(jk.batch.ResultWriter, "append", spy)
+    monkeypatch.setattr(jk.io.ResultWriter, "append", spy)
     code, _, _ = run(capsys, "velocities", "two_link_planar", "--n", "5000", "--chunk-size",
                      "512", "--output", "s.csv")  # fmt: skip
     assert code == 0 and sum(sizes) == 5000 and max(sizes) <= 1000

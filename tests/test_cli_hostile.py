@@ -122,7 +122,7 @@ def test_npz_members_are_sized_before_they_are_read(capsys, monkeypatch, in_tmp)
     assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations", "short.npz",
                        match="the file is corrupt")  # fmt: skip
     np.savez(in_tmp / "big.npz", q=np.zeros((100, 2)))  # 1,728 bytes with its header
-    monkeypatch.setattr(cli, "MAX_INPUT_BYTES", 1000)
+    monkeypatch.setattr(jk.io, "MAX_INPUT_BYTES", 1000)
     assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations", "big.npz",
                        match="over the 1,000 bytes cap")  # fmt: skip
     (in_tmp / "big.csv").write_text("0.1,0.2\n" * 200)
@@ -151,7 +151,7 @@ class Endless(io.RawIOBase):
 def test_stdin_is_read_up_to_a_cap(capsys, monkeypatch):
     stream = Endless()
     monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BufferedReader(stream)))
-    monkeypatch.setattr(cli, "MAX_INPUT_BYTES", 100_000)
+    monkeypatch.setattr(jk.io, "MAX_INPUT_BYTES", 100_000)
     assert_usage_error(capsys, "velocities", "two_link_planar", "--configurations", "-",
                        match="more than 97.7 KiB (the cap")  # fmt: skip
     assert stream.served <= 100_000 + (1 << 20)
@@ -249,7 +249,7 @@ def test_jacobian_csv_and_text_output_escape_names(capsys, in_tmp):
     code, out, _ = run(capsys, "jacobian", "arm.urdf", "--q", "0.1", "0.2", "0.05",
                        "--format", "csv")  # fmt: skip
     assert code == 0
-    records = [fields for _, fields in jk.batch.csv_records(io.StringIO(out, newline=""))]
+    records = [fields for _, fields in jk.io.csv_records(io.StringIO(out, newline=""))]
     assert records[0] == ["row", *robot.joint_names]
     assert len(records) == 7 and all(len(r) == 1 + robot.dof for r in records)
     code, out, _ = run(capsys, "jacobian", "arm.urdf", "--q", "0.1", "0.2", "0.05")

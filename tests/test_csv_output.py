@@ -1,6 +1,6 @@
 """CSV results are untrusted text: names and comments cannot forge rows, and what the writer
 writes (names with ',', '"', line breaks, '#', any Unicode; float64 values) reads back exactly,
-with jaxkin.batch.csv_records and with the command line's configuration reader."""
+with jaxkin.io.csv_records and with jaxkin.io.read_configurations (the command line's reader)."""
 
 import os
 import types
@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import jaxkin as jk
 from jaxkin import cli
-from jaxkin.batch import ResultWriter, csv_records
+from jaxkin.io import ResultWriter, csv_records, read_configurations
 
 # Characters that break naive CSV, among any others (lone surrogates excepted: UTF-8 cannot
 # carry them, and the writer refuses them by name).
@@ -74,7 +74,7 @@ def test_the_command_line_reads_back_configurations_it_could_write(
         w.append({"q": q, "qd": qd})
         w.commit()
     robot = types.SimpleNamespace(name=robot_name, joint_names=tuple(joints), dof=dof)
-    got_q, got_qd = cli.read_configurations(str(path), robot, np.float64)
+    got_q, got_qd = read_configurations(str(path), robot, np.float64)
     np.testing.assert_array_equal(got_q.view(np.int64), q.view(np.int64))
     np.testing.assert_array_equal(got_qd.view(np.int64), qd.view(np.int64))
 
@@ -183,8 +183,8 @@ def test_joint_names_that_look_like_columns(tmp_path):
         w.append({"q": np.array([[1.0, 2.0, 3.0]]), "qd": np.array([[4.0, 5.0, 6.0]])})
         w.commit()
     robot = types.SimpleNamespace(name="r", joint_names=joints, dof=3)
-    q, qd = cli.read_configurations(str(tmp_path / "c.csv"), robot, np.float64)
+    q, qd = read_configurations(str(tmp_path / "c.csv"), robot, np.float64)
     assert q.tolist() == [[1.0, 2.0, 3.0]] and qd.tolist() == [[4.0, 5.0, 6.0]]
     (tmp_path / "d.csv").write_text("q_a, a , b \n1,2,3\n")  # hand-written: names as given
-    q, qd = cli.read_configurations(str(tmp_path / "d.csv"), robot, np.float64)
+    q, qd = read_configurations(str(tmp_path / "d.csv"), robot, np.float64)
     assert q.tolist() == [[2.0, 1.0, 3.0]] and qd is None

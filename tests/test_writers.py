@@ -1,4 +1,4 @@
-"""jaxkin.batch.ResultWriter and chunked_map(out=path): files appear whole or not at all.
+"""jaxkin.io.ResultWriter and chunked_map(out=path): files appear whole or not at all.
 
 Temporaries live next to the final name, as ``.<name>.<random>.tmp`` (a file for npz and csv, a
 directory for directory outputs). SIGTERM, Ctrl-C, exceptions and a full disk remove them; only
@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin.batch import ResultWriter, chunked_map
+from jaxkin.batch import chunked_map
+from jaxkin.io import ResultWriter
 
 
 def row_fn(x):
@@ -245,7 +246,7 @@ def test_file_size_limit_mid_write_leaves_nothing(tmp_path, name):
 )
 def test_disk_space_refusal_uses_units_that_fit(tmp_path, monkeypatch, nbytes, text):
     usage = collections.namedtuple("usage", "total used free")
-    monkeypatch.setattr(jk.batch.shutil, "disk_usage", lambda path: usage(10**15, 0, nbytes))
+    monkeypatch.setattr(jk.io.shutil, "disk_usage", lambda path: usage(10**15, 0, nbytes))
     n = max(nbytes, 1000) // 4  # 8 bytes a row: twice the space there is
     match = rf"needs about .+ and {re.escape(str(tmp_path))} has {text} free;"
     with pytest.raises(jk.JaxkinError, match=match):
@@ -255,7 +256,7 @@ def test_disk_space_refusal_uses_units_that_fit(tmp_path, monkeypatch, nbytes, t
 
 def test_disk_space_refusal_names_small_sizes_in_bytes_and_kb(tmp_path, monkeypatch):
     usage = collections.namedtuple("usage", "total used free")
-    monkeypatch.setattr(jk.batch.shutil, "disk_usage", lambda path: usage(10**6, 0, 1000))
+    monkeypatch.setattr(jk.io.shutil, "disk_usage", lambda path: usage(10**6, 0, 1000))
     with pytest.raises(jk.JaxkinError) as e:
         ResultWriter(tmp_path / "r.npz", {"x": ((), "float64")}, 1000)
     assert "0.0 GB" not in str(e.value)
