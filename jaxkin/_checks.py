@@ -125,13 +125,6 @@ def result_dtype(robot: Robot, *arrays: Any) -> np.dtype:
     return np.result_type(dtype, *(a.dtype for a in arrays))
 
 
-def safe_norm(x: jax.Array, axis: Any = None) -> jax.Array:
-    """Euclidean norm with gradient 0 (never NaN) at ``x = 0`` (double-``where`` safe value)."""
-    sq = jnp.sum(x * x, axis=axis)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
-
-
 # ----------------------------------------------------------------------------- arrays
 def _as_array(x: Any, what: str, fn: str, expected: str) -> Any:
     """``x`` as something with ``shape`` and ``dtype`` (lists become numpy), or a ShapeError."""

@@ -67,6 +67,7 @@ from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
 from .kinematics import forward_pass
 from .model import Robot
+from .spatial import safe_sqrt
 
 __all__ = [
     "MEASURES",
@@ -593,9 +594,7 @@ def _wrist_centre(fp, wrist_model):
         b = b + P @ o
     c = jnp.linalg.solve(A, b)
     d2 = jnp.max(jnp.stack([jnp.sum((P @ (c - o)) ** 2) for P, o in Ps]))
-    pos = d2 > 0
-    dist = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)  # double-where: finite grad
-    return c, dist
+    return c, safe_sqrt(d2)  # finite gradient where the axes meet
 
 
 def wrist_decoupling(

@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import JaxkinPrecisionWarning, ModelError
 from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot
-from .rigid import quaternion_matrix
+from .spatial import matrix_to_rpy_np, quaternion_to_matrix_np
 
 __all__ = [
     "TOOL_FLANGE",
@@ -29,7 +29,6 @@ __all__ = [
     "from_joints",
     "resolve_dtype",
     "resolve_mimics",
-    "rotation_to_rpy",
 ]
 
 _DH_CONVENTIONS = {"standard": "dh_standard", "modified": "dh_modified"}
@@ -187,7 +186,8 @@ def from_joints(
         origin's rotation may be ``quat``, a quaternion ``(w, x, y, z)`` (scalar first, MuJoCo's
         order; normalised), and instead of ``xyz`` and ``rpy`` the whole origin may be
         ``transform``, a 4x4 homogeneous ``T_parent_joint``: exactly one form per joint. Both are
-        stored as ``xyz``/``rpy`` (:func:`rotation_to_rpy`: exact to rounding, gimbal lock too).
+        stored as ``xyz``/``rpy`` (:func:`jaxkin.spatial.matrix_to_rpy_np`: exact to rounding,
+        gimbal lock too).
         An empty ``joints`` gives a robot whose only frame is ``root`` (dof 0).
       root: the name of the base frame.
       base, tool, name, dtype: as in :meth:`from_dh`.
@@ -398,10 +398,10 @@ def _placement(spec: Mapping[str, Any], where: str) -> tuple[np.ndarray, np.ndar
         )
     if "transform" in spec:
         T = _transform(spec["transform"], f"{where}, key 'transform'")
-        return T[:3, 3].copy(), rotation_to_rpy(T[:3, :3])
+        return T[:3, 3].copy(), matrix_to_rpy_np(T[:3, :3])
     xyz = _vector3(spec.get("xyz", (0.0, 0.0, 0.0)), f"{where}, key 'xyz'")
     if "quat" in spec:
-        return xyz, rotation_to_rpy(_quat_matrix(spec["quat"], f"{where}, key 'quat'"))
+        return xyz, matrix_to_rpy_np(_quat_matrix(spec["quat"], f"{where}, key 'quat'"))
     return xyz, _vector3(spec.get("rpy", (0.0, 0.0, 0.0)), f"{where}, key 'rpy'")
 
 
@@ -417,32 +417,7 @@ def _quat_matrix(value: Any, where: str) -> np.ndarray:
     norm = math.hypot(*(float(x) for x in q))
     if norm == 0.0:
         raise ModelError(f"{where} is the zero quaternion; give a rotation, e.g. (1, 0, 0, 0).")
-    return quaternion_matrix(q)
-
-
-def rotation_to_rpy(R: Any) -> np.ndarray:
-    """Roll, pitch, yaw (``R = Rz(yaw) Ry(pitch) Rx(roll)``) of a 3x3 rotation, in float64 on
-    the host: yaw from the first column, then roll and pitch from ``Rz(-yaw) R = Ry(pitch)
-    Rx(roll)``, whose entries stay of order one, so the angles rebuild ``R`` to rounding (about
-    1e-16) everywhere, at and near gimbal lock (pitch = +-pi/2; yaw is 0 where the first
-    column has no x, y component at all) too.
-
-    >>> import numpy as np
-    >>> from jaxkin.build import rotation_to_rpy
-    >>> rotation_to_rpy(np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]))  # pitch = pi/2
-    array([0.        , 1.57079633, 0.        ])
-    """
-    R = np.asarray(R, dtype=np.float64)
-    c = math.hypot(R[0, 0], R[1, 0])
-    yaw = math.atan2(R[1, 0], R[0, 0]) if c > 0.0 else 0.0
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    # Rz(-yaw) R = Ry(pitch) Rx(roll) = [[cp, sp sr, sp cr], [0, cr, -sr], [-sp, cp sr, cp cr]]
-    r00 = cy * R[0, 0] + sy * R[1, 0]
-    r11 = -sy * R[0, 1] + cy * R[1, 1]
-    r12 = -sy * R[0, 2] + cy * R[1, 2]
-    roll = math.atan2(-r12, r11)
-    pitch = math.atan2(-R[2, 0], r00)
-    return np.array([roll, pitch, yaw]) + 0.0  # no -0.0
+    return quaternion_to_matrix_np(q)
 
 
 def _unit_axis(value: Any, kind: str, where: str) -> np.ndarray:
@@ -701,9 +676,11 @@ def resolve_mimics(
 
 
 TOOL_FLANGE = "tool0"
-"""ROS-Industrial's tool flange frame (REP 199: "tool0", the robot's mounting flange, with no
-tool attached). Where the fixed frames hanging off the last moving link branch, the default
-frame follows the branch to a link of this name (see :func:`end_frames`)."""
+"""The name of ROS-Industrial's tool flange frame, as REP 199 defines it.
+
+``tool0`` is the robot's mounting flange with no tool attached. Where the fixed frames hanging
+off the last moving link branch, the default frame follows the branch to a link of this name
+(see :func:`end_frames`)."""
 
 
 def end_frames(root: str, joints: Sequence[tuple[str, str, bool]]) -> tuple[str, ...]:

@@ -49,6 +49,16 @@ from ._checks import check_q, check_robot, check_scalar, check_v, result_dtype
 from ._jit import eager
 from .build import resolve_dtype
 from .model import COORDINATES, JOINT_SIZES, Robot
+from .spatial import (
+    left_jacobian_so3,
+    left_jacobian_so3_inverse,
+    quaternion_conjugate,
+    quaternion_exp,
+    quaternion_log,
+    quaternion_multiply,
+    quaternion_to_matrix,
+    small_angle,
+)
 
 __all__ = ["difference", "integrate", "neutral", "normalize"]
 
@@ -64,30 +74,6 @@ def _segments(robot: Robot) -> list[tuple[str, int, int]]:
     return [seen[k] for k in sorted(seen)]
 
 
-def _taylor(dtype) -> float:
-    return 1e-3 if np.dtype(dtype).itemsize == 8 else 3e-2
-
-
-def _small(sq, dtype):
-    """``(small, safe)``: ``sq < eps^2``, and ``sq`` with 1 where small (double-where)."""
-    small = sq < _taylor(dtype) ** 2
-    return small, jnp.where(small, jnp.ones_like(sq), sq)
-
-
-# ----------------------------------------------------------------------------- SO(3), SE(3)
-def _quat_mul(a, b):
-    w1, x1, y1, z1 = a[0], a[1], a[2], a[3]
-    w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
-    return jnp.stack(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
-
-
 def _unit(x):
     """``x`` / ``|x|``, scaled by its largest magnitude first so that no square overflows or
     underflows (NaN for ``x = 0``)."""
@@ -95,69 +81,7 @@ def _unit(x):
     return x * jax.lax.rsqrt(jnp.sum(x * x))
 
 
-def _quat_exp(w):
-    """Unit quaternion of the rotation vector ``w`` (3,): ``(cos(t/2), sin(t/2) w / t)``."""
-    sq = jnp.sum(w * w)
-    small, safe = _small(sq, w.dtype)
-    t = jnp.sqrt(safe)
-    half = jnp.where(small, 0.5 - sq / 48.0 + sq * sq / 3840.0, jnp.sin(0.5 * t) / t)
-    c = jnp.where(small, 1.0 - sq / 8.0 + sq * sq / 384.0, jnp.cos(0.5 * t))
-    return jnp.concatenate([c[None], half * w])
-
-
-def _quat_log(q):
-    """Rotation vector (angle in [0, pi]) of the unit quaternion ``q``."""
-    q = jnp.where(q[0] < 0, -q, q)
-    w, v = q[0], q[1:]
-    sq = jnp.sum(v * v)
-    small, safe = _small(sq, q.dtype)
-    n = jnp.sqrt(safe)
-    # 2 atan2(n, w) / n; near n = 0 (w near 1): 2 / w (1 - u^2 / 3 + u^4 / 5), u = n / w
-    u2 = sq / (w * w)
-    near = 2.0 / w * (1.0 - u2 / 3.0 + u2 * u2 / 5.0)
-    return jnp.where(small, near, 2.0 * jnp.arctan2(n, w) / n) * v
-
-
-def _quat_matrix(q):
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return jnp.stack(
-        [
-            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
-            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
-            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
-        ]
-    )
-
-
-def _skew(w):
-    z = jnp.zeros_like(w[0])
-    return jnp.stack(
-        [jnp.stack([z, -w[2], w[1]]), jnp.stack([w[2], z, -w[0]]), jnp.stack([-w[1], w[0], z])]
-    )
-
-
-def _se3_V(w):
-    """The left Jacobian of SO(3), ``V = I + (1 - cos t)/t^2 K + (t - sin t)/t^3 K^2``."""
-    sq = jnp.sum(w * w)
-    small, safe = _small(sq, w.dtype)
-    t = jnp.sqrt(safe)
-    B = jnp.where(small, 0.5 - sq / 24.0 + sq * sq / 720.0, (1.0 - jnp.cos(t)) / safe)
-    C = jnp.where(small, 1.0 / 6.0 - sq / 120.0 + sq * sq / 5040.0, (t - jnp.sin(t)) / (safe * t))
-    K = _skew(w)
-    return jnp.eye(3, dtype=w.dtype) + B * K + C * (K @ K)
-
-
-def _se3_V_inv(w):
-    """``V^-1 = I - K/2 + (1 - t sin t / (2 (1 - cos t))) / t^2 K^2`` (angle t <= pi)."""
-    sq = jnp.sum(w * w)
-    small, safe = _small(sq, w.dtype)
-    t = jnp.sqrt(safe)
-    regular = (1.0 - t * jnp.sin(t) / (2.0 * (1.0 - jnp.cos(t)))) / safe
-    D = jnp.where(small, 1.0 / 12.0 + sq / 720.0 + sq * sq / 30240.0, regular)
-    K = _skew(w)
-    return jnp.eye(3, dtype=w.dtype) - 0.5 * K + D * (K @ K)
-
-
+# ----------------------------------------------------------------------------- quaternions
 def _same_hemisphere(q1, q0):
     """``q1`` or ``-q1`` (the same rotation), whichever is nearer ``q0`` (Pinocchio's choice)."""
     return jnp.where(jnp.dot(q1, q0) < 0, -q1, q1)
@@ -167,7 +91,7 @@ def _same_hemisphere(q1, q0):
 def _se2_AB(w):
     """``(sin w / w, (1 - cos w) / w)``, the entries of SE(2)'s ``V = [[A, -B], [B, A]]``."""
     sq = w * w
-    small, _ = _small(sq, w.dtype)
+    small, _ = small_angle(sq)
     ws = jnp.where(small, jnp.ones_like(w), w)
     A = jnp.where(small, 1.0 - sq / 6.0 + sq * sq / 120.0, jnp.sin(ws) / ws)
     B = jnp.where(small, w * (0.5 - sq / 24.0 + sq * sq / 720.0), (1.0 - jnp.cos(ws)) / ws)
@@ -178,11 +102,11 @@ def _se2_AB(w):
 def _integrate_joint(kind: str, q, v):
     if kind == "ball":
         q0 = _unit(q)
-        return _unit(_same_hemisphere(_quat_mul(q0, _quat_exp(v)), q0))
+        return _unit(_same_hemisphere(quaternion_multiply(q0, quaternion_exp(v)), q0))
     if kind == "free":
         t0, q0 = q[:3], _unit(q[3:])
-        t1 = t0 + _quat_matrix(q0) @ (_se3_V(v[3:]) @ v[:3])
-        q1 = _unit(_same_hemisphere(_quat_mul(q0, _quat_exp(v[3:])), q0))
+        t1 = t0 + quaternion_to_matrix(q0) @ (left_jacobian_so3(v[3:]) @ v[:3])
+        q1 = _unit(_same_hemisphere(quaternion_multiply(q0, quaternion_exp(v[3:])), q0))
         return jnp.concatenate([t1, q1])
     # planar
     cs = _unit(q[2:])
@@ -203,12 +127,12 @@ def _integrate_joint(kind: str, q, v):
 
 def _difference_joint(kind: str, q0, q1):
     if kind == "ball":
-        return _quat_log(_quat_mul(_conj(_unit(q0)), _unit(q1)))
+        return quaternion_log(quaternion_multiply(quaternion_conjugate(_unit(q0)), _unit(q1)))
     if kind == "free":
         r0, r1 = _unit(q0[3:]), _unit(q1[3:])
-        w = _quat_log(_quat_mul(_conj(r0), r1))
-        t = _quat_matrix(r0).T @ (q1[:3] - q0[:3])
-        return jnp.concatenate([_se3_V_inv(w) @ t, w])
+        w = quaternion_log(quaternion_multiply(quaternion_conjugate(r0), r1))
+        t = quaternion_to_matrix(r0).T @ (q1[:3] - q0[:3])
+        return jnp.concatenate([left_jacobian_so3_inverse(w) @ t, w])
     a, b = _unit(q0[2:]), _unit(q1[2:])
     c0, s0, c1, s1 = a[0], a[1], b[0], b[1]
     w = jnp.arctan2(c0 * s1 - s0 * c1, c0 * c1 + s0 * s1)
@@ -217,10 +141,6 @@ def _difference_joint(kind: str, q0, q1):
     A, B = _se2_AB(w)
     n = A * A + B * B
     return jnp.stack([(A * lx + B * ly) / n, (-B * lx + A * ly) / n, w])
-
-
-def _conj(q):
-    return q * jnp.asarray([1.0, -1.0, -1.0, -1.0], q.dtype)
 
 
 # ----------------------------------------------------------------------------- kernels

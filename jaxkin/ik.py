@@ -49,7 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import sampling, spatial
-from ._checks import check_poses, check_q, check_robot, is_traced, refuse_multi_dof, safe_norm
+from ._checks import check_poses, check_q, check_robot, is_traced, refuse_multi_dof
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .ik_gradients import full_rank, solution_tangent
@@ -59,6 +59,7 @@ from .model import Robot
 from .optimizers import default_optimizer
 from .placements import joint_placements
 from .pose_errors import pose_error_norms, pose_residual
+from .spatial import safe_norm
 
 __all__ = ["RESULTS", "IKError", "IKSolution", "reach_bound", "sample_configurations", "solve_ik"]
 

@@ -46,13 +46,13 @@ from ._checks import (
     is_traced,
     refuse_multi_dof,
     result_dtype,
-    safe_norm,
 )
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
 from .jacobians import jacobian_pass
 from .model import Robot
 from .pose_errors import pose_error
+from .spatial import safe_norm, safe_sqrt
 
 __all__ = [
     "ResolvedRateResult",
@@ -244,8 +244,7 @@ def adaptive_damping(J: Any, *, max_damping: float, threshold: float) -> jax.Arr
     smin = s[-1] if m <= n else jnp.zeros((), J.dtype)
     ratio = jnp.minimum(smin / threshold, 1.0)
     lam2 = max_damping**2 * (1.0 - ratio * ratio)
-    pos = lam2 > 0
-    return guard(jnp.where(pos, jnp.sqrt(jnp.where(pos, lam2, 1.0)), 0.0))
+    return guard(safe_sqrt(lam2))
 
 
 # ----------------------------------------------------------------------------- null space

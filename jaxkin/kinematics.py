@@ -163,42 +163,15 @@ def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
 _MULTI = ("free", "ball", "planar")
 
 
-def max_scaled(*coords) -> list:
-    """``coords`` (scalars) divided by the largest of their magnitudes: the same direction, with
-    squares that neither overflow (a quaternion scaled by 1e200) nor underflow (by 1e-200); all
-    NaN when every one is zero. Division, not a reciprocal: ``1 / m`` overflows for subnormal
-    ``m``."""
-    m = functools.reduce(jnp.maximum, [jnp.abs(c) for c in coords])
-    return [c / m for c in coords]
-
-
-def quaternion_rotation(w, x, y, z) -> tuple:
-    """The rotation (nested tuples) of the quaternion ``(w, x, y, z)`` divided by its norm:
-    ``I + 2 / |q|^2 (w [v]x + [v]x^2)``, so a non-unit quaternion of any finite nonzero size gives
-    the rotation of its unit multiple (scaled first, :func:`max_scaled`) and the zero quaternion
-    gives NaN."""
-    w, x, y, z = max_scaled(w, x, y, z)
-    s = 2.0 / (w * w + x * x + y * y + z * z)
-    xs, ys, zs = x * s, y * s, z * s
-    wx, wy, wz = w * xs, w * ys, w * zs
-    xx, xy, xz = x * xs, x * ys, x * zs
-    yy, yz, zz = y * ys, y * zs, z * zs
-    return (
-        (1.0 - (yy + zz), xy - wz, xz + wy),
-        (xy + wz, 1.0 - (xx + zz), yz - wx),
-        (xz - wy, yz + wx, 1.0 - (xx + yy)),
-    )
-
-
 def joint_motion(kind: str, coords: list) -> tuple:
     """``(R, t)`` of a free, ball or planar joint's motion (child frame in the joint frame) from
     its coordinates (see :mod:`jaxkin.configuration`); ``t`` is None for a ball joint."""
     if kind == "free":
-        return quaternion_rotation(*coords[3:]), tuple(coords[:3])
+        return spatial.quaternion_rotation(*coords[3:]), tuple(coords[:3])
     if kind == "ball":
-        return quaternion_rotation(*coords), None
+        return spatial.quaternion_rotation(*coords), None
     x, y, c, s = coords
-    c, s = max_scaled(c, s)
+    c, s = spatial.max_scaled(c, s)
     inv = jax.lax.rsqrt(c * c + s * s)
     c, s = c * inv, s * inv
     return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)), (x, y, 0.0)

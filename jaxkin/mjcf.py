@@ -100,7 +100,9 @@ import numpy as np
 from .build import end_frames
 from .errors import JaxkinError, ModelError
 from .model import Robot
-from .rigid import axis_rotation, homogeneous, quaternion_matrix
+from .spatial import make_transform_np as homogeneous
+from .spatial import quaternion_to_matrix_np as quaternion_matrix
+from .spatial import rotation_about_axis_np as axis_rotation
 
 __all__ = [
     "MAX_BODIES",

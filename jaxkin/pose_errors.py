@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from . import spatial
-from ._checks import safe_norm
+from .spatial import safe_norm
 
 __all__ = ["pose_error", "pose_error_norms", "pose_residual"]
 
@@ -49,10 +49,11 @@ def pose_residual(T: jax.Array, T_target: jax.Array) -> jax.Array:
     a = spatial.vee(M)  # sin(theta) * axis
     s2 = jnp.sum(a * a)
     c = 0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0)
-    tiny = jnp.finfo(T.dtype).tiny
-    pos = s2 > tiny
-    s = jnp.where(pos, jnp.sqrt(jnp.where(pos, s2, 1.0)), 0.0)
+    pos = s2 > jnp.finfo(T.dtype).tiny
+    s = spatial.safe_sqrt(s2, pos)
     theta = jnp.arctan2(s, c)
+    # 1e-3 in every dtype, not spatial.get_epsilon (3e-2 in float32): theta / s and the series of
+    # theta / sin(theta) agree on SO(3) only; their derivatives off it differ by O(theta).
     small = theta < 1e-3
     t2 = theta * theta
     factor = jnp.where(

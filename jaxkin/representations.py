@@ -145,18 +145,7 @@ def rate_matrix(phi, representation: str = "rpy") -> jax.Array:
                 jnp.stack([one, zero, ct]),
             ]
         )
-    # rotvec: left Jacobian of SO(3), Taylor branch near 0.
-    t2 = jnp.sum(phi * phi)
-    eps = 1e-3 if jnp.finfo(phi.dtype).bits == 64 else 3e-2
-    small = t2 < eps**2
-    safe_t2 = jnp.where(small, jnp.ones_like(t2), t2)
-    t = jnp.sqrt(safe_t2)
-    a = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / safe_t2)
-    b = jnp.where(
-        small, 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0, (t - jnp.sin(t)) / (safe_t2 * t)
-    )
-    K = spatial.skew(phi)
-    return jnp.eye(3, dtype=phi.dtype) + a * K + b * (K @ K)
+    return spatial.left_jacobian_so3(phi)  # rotvec
 
 
 def rate_matrix_autodiff(phi, representation: str = "rpy") -> jax.Array:
@@ -190,9 +179,7 @@ def representation_margin(phi, representation: str = "rpy") -> jax.Array:
         return jnp.abs(jnp.cos(phi[1]))
     if representation == "zyz":
         return jnp.abs(jnp.sin(phi[1]))
-    n2 = jnp.sum(phi * phi)
-    safe = jnp.where(n2 > 0, n2, 1.0)
-    return 1.0 - jnp.where(n2 > 0, jnp.sqrt(safe), 0.0) / (2 * jnp.pi)
+    return 1.0 - spatial.safe_norm(phi) / (2 * jnp.pi)
 
 
 def analytical_from_geometric(J_geometric, phi, representation: str = "rpy") -> jax.Array:

@@ -38,19 +38,9 @@ from ._checks import is_traced
 from .errors import ModelError
 from .model import Robot
 from .placements import joint_placements
-from .rigid import axis_rotation, homogeneous
+from .spatial import make_transform_np, matrix_to_rpy_np, rotation_about_axis_np
 
 __all__ = ["to_urdf"]
-
-
-def _rpy(R: np.ndarray) -> tuple[float, float, float]:
-    """URDF (roll, pitch, yaw) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``, stable at pitch = +-pi/2:
-    yaw first, then roll and pitch from ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose second row is
-    ``[0, cos(roll), -sin(roll)]`` and first column ``[cos(pitch), 0, -sin(pitch)]`` for any
-    yaw."""
-    yaw = math.atan2(R[1, 0], R[0, 0])
-    M = axis_rotation(np.array([0.0, 0.0, 1.0]), -yaw) @ R
-    return math.atan2(-M[1, 2], M[1, 1]), math.atan2(-M[2, 0], M[0, 0]), yaw
 
 
 def _num(x: float) -> str:
@@ -60,7 +50,7 @@ def _num(x: float) -> str:
 
 def _origin(T: np.ndarray) -> str:
     xyz = " ".join(_num(v) for v in T[:3, 3])
-    rpy = " ".join(_num(v) for v in _rpy(T[:3, :3]))
+    rpy = " ".join(_num(v) for v in matrix_to_rpy_np(T[:3, :3]))
     return f"<origin xyz={quoteattr(xyz)} rpy={quoteattr(rpy)}/>"
 
 
@@ -202,7 +192,7 @@ class _Writer:
         when it has a placement ``A_j``."""
         robot, pl = self.robot, self.pl
         parent, child = self.frames[robot.parents[j]], self.frames[j + 1]
-        B = homogeneous(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
+        B = make_transform_np(*(None, None) if pl.B is None else (pl.B[0][j], pl.B[1][j]))
         has_A = pl.A is not None
         motion_link = self._new_link(f"{child}_motion") if has_A else child
         if robot.kinds[j] == "fixed":
@@ -210,7 +200,7 @@ class _Writer:
         else:
             out = self._moving(j, parent, motion_link, B)
         if has_A:
-            A = homogeneous(pl.A[0][j], pl.A[1][j])
+            A = make_transform_np(pl.A[0][j], pl.A[1][j])
             out += _fixed(_fresh(f"{child}_dh", self.joints), motion_link, child, A)
         return out
 
@@ -227,9 +217,9 @@ class _Writer:
         i = robot.q_index[j]
         a = self.axis[j] / np.linalg.norm(self.axis[j])
         if kind == "revolute":
-            B = B @ homogeneous(axis_rotation(a, self.offset[j]), None)
+            B = B @ make_transform_np(rotation_about_axis_np(a, self.offset[j]), None)
         else:
-            B = B @ homogeneous(None, a * self.offset[j])
+            B = B @ make_transform_np(None, a * self.offset[j])
         lead = self.leader[i]
         if lead == j:
             name, a_out = robot.joint_names[i], a * np.sign(mult[j])

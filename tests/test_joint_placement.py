@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin.build import rotation_to_rpy
+from jaxkin.spatial import matrix_to_rpy_np as rotation_to_rpy
 
 
 def _rpy_matrix(r, p, y):

@@ -93,7 +93,7 @@ def test_poses_and_jacobians_match_mujoco():
             T = Ts[robot.frame_names.index(f)]
             J = out[f][k].copy()
             for qi, vi in free:  # jaxkin: body-axes linear velocity; MuJoCo: world axes
-                R = np.asarray(jk.rigid.quaternion_matrix(q[qi + 3 : qi + 7]))
+                R = np.asarray(jk.spatial.quaternion_to_matrix_np(q[qi + 3 : qi + 7]))
                 J[:, vi : vi + 3] = J[:, vi : vi + 3] @ R.T
             jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
             body = m.site_bodyid[0] if f == "hand" else m.body(f).id
