@@ -100,9 +100,7 @@ import numpy as np
 from .build import end_frames
 from .errors import JaxkinError, ModelError
 from .model import Robot
-from .spatial import make_transform_np as homogeneous
-from .spatial import quaternion_to_matrix_np as quaternion_matrix
-from .spatial import rotation_about_axis_np as axis_rotation
+from .spatial import make_transform_np, quaternion_to_matrix_np, rotation_about_axis_np
 
 __all__ = [
     "MAX_BODIES",
@@ -411,7 +409,7 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
     """Joint specs that place body ``b`` (and its joints' anchor frames) in its parent."""
     bodies, joints, frame_name = names
     parent = bodies[int(m.body_parentid[b])]
-    T = homogeneous(quaternion_matrix(m.body_quat[b]), m.body_pos[b])
+    T = make_transform_np(quaternion_to_matrix_np(m.body_quat[b]), m.body_pos[b])
     adr, num = int(m.body_jntadr[b]), int(m.body_jntnum[b])
     if num == 0:
         return [_fixed(f"weld:{bodies[b]}", parent, bodies[b], T)]
@@ -424,13 +422,13 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
         if jtype == "free":  # qpos is the body's pose in its parent (the world): body_pos unused
             T = np.eye(4)
         elif jtype == "ball":  # qpos is the rotation about the anchor (MuJoCo ignores ref)
-            T = T @ homogeneous(None, anchor)
+            T = T @ make_transform_np(None, anchor)
         elif jtype == "hinge":  # Rot(axis, qpos - ref) = Rot(axis, -ref) Rot(axis, qpos)
             ref = float(m.qpos0[m.jnt_qposadr[j]])
-            T = T @ homogeneous(axis_rotation(axis, -ref), anchor)
+            T = T @ make_transform_np(rotation_about_axis_np(axis, -ref), anchor)
         else:  # Trans(axis (qpos - ref)) = Trans(-ref axis) Trans(axis qpos)
             ref = float(m.qpos0[m.jnt_qposadr[j]])
-            T = T @ homogeneous(None, -ref * axis)
+            T = T @ make_transform_np(None, -ref * axis)
         # Its own frame at the anchor, unless it is the body's last joint and sits at its origin.
         last, at_origin = k == num - 1, not np.any(anchor != 0.0)
         child = bodies[b] if last and at_origin else frame_name(joints[j])
@@ -450,7 +448,7 @@ def _body_specs(m, b: int, names, label: str) -> list[dict[str, Any]]:
             )
         specs.append(spec)
         parent = child
-        T = homogeneous(None, -anchor)
+        T = make_transform_np(None, -anchor)
     if specs[-1]["child"] != bodies[b]:
         specs.append(_fixed(f"weld:{bodies[b]}", parent, bodies[b], T))
     return specs
@@ -470,7 +468,7 @@ def _all_specs(mujoco, m, label: str) -> tuple[list[dict[str, Any]], dict[str, s
     taken |= {s["child"] for s in specs}
     for s in range(m.nsite):
         b = int(m.site_bodyid[s])
-        T = homogeneous(quaternion_matrix(m.site_quat[s]), m.site_pos[s])
+        T = make_transform_np(quaternion_to_matrix_np(m.site_quat[s]), m.site_pos[s])
         child = frame_name(sites[s], "site")
         taken.add(child)
         specs.append(_fixed(f"site:{sites[s]}", bodies[b], child, T))
