@@ -6,6 +6,7 @@ changing results (no fast-math). Empty if this jax/XLA does not know one of them
 """
 
 import collections
+import functools
 import re
 
 import jax
@@ -27,6 +28,21 @@ def _fast_compile_options() -> dict:
 
 
 FAST_COMPILE = _fast_compile_options()
+
+
+def op_by_op(test):
+    """``test`` run under ``jax.disable_jit()``: for a property over random robots (put it below
+    ``@given``). Each example's robot is used once, and compiling programs for it (jaxkin's eager
+    calls compile one per robot value and function) costs seconds; op by op, every primitive is
+    compiled once per shape for the whole session and the example costs only its dispatch. The
+    values are those of the same operations (what compiled code computes is tested elsewhere)."""
+
+    @functools.wraps(test)
+    def run(*args, **kwargs):
+        with jax.disable_jit():
+            return test(*args, **kwargs)
+
+    return run
 
 
 def jaxpr_eqns(fn, *args) -> list:

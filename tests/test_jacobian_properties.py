@@ -9,6 +9,7 @@ reference and for any frame and point.
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _xla import op_by_op
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -23,13 +24,14 @@ def _reach(robot, q):
 
 
 @settings(max_examples=5)  # up to 12 joints: each example compiles a large program
-@given(jkt.robots_and_configurations(1, 12, kind="dh"))
+@given(jkt.robots_and_configurations(1, 12, kind="dh"))  # compiled: op by op costs more here
 def test_triangle_dh(robot_q):
     robot, q = robot_q
     jkt.assert_jacobian_consistent(robot, q)
 
 
 @given(jkt.robots_and_configurations(1, 8, kind="tree"), st.data())
+@op_by_op
 def test_triangle_tree_any_frame_and_point(robot_q, data):
     robot, q = robot_q
     frame = data.draw(st.sampled_from(robot.frame_names))
@@ -38,6 +40,7 @@ def test_triangle_tree_any_frame_and_point(robot_q, data):
 
 
 @given(jkt.robots_and_configurations(1, 10), st.data())
+@op_by_op
 def test_reference_identities(robot_q, data):
     robot, q = robot_q
     frame = data.draw(st.sampled_from(robot.frame_names))
@@ -62,6 +65,7 @@ def test_reference_identities(robot_q, data):
 
 
 @given(jkt.robots_and_configurations(1, 10), st.data())
+@op_by_op
 def test_twist_equals_J_qd_equals_jvp_of_fk(robot_q, data):
     robot, q = robot_q
     qd = data.draw(jkt.configurations(robot))
@@ -84,6 +88,7 @@ def test_twist_equals_J_qd_equals_jvp_of_fk(robot_q, data):
 
 
 @given(jkt.robots_and_configurations(1, 8), st.data())
+@op_by_op
 def test_point_velocity_is_rigid_body_transport(robot_q, data):
     robot, q = robot_q
     qd = data.draw(jkt.configurations(robot))

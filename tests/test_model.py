@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import op_by_op
 from hypothesis import given
 
 import jaxkin as jk
@@ -78,13 +79,14 @@ def test_grad_with_respect_to_dh_parameters_matches_finite_differences(robot):
 
     g = jax.grad(loss)(robot)
     h = 1e-6
+    loss_of = jax.jit(loss)  # the robot traced: one compile for every perturbed robot
     for key in ("a", "alpha", "d", "theta"):
         assert g.params[key].shape == robot.params[key].shape
         for i in range(robot.n_joints):
             e = jnp.zeros(robot.n_joints).at[i].set(h)
             plus = robot.replace(params={**robot.params, key: robot.params[key] + e})
             minus = robot.replace(params={**robot.params, key: robot.params[key] - e})
-            fd = (loss(plus) - loss(minus)) / (2 * h)
+            fd = (loss_of(plus) - loss_of(minus)) / (2 * h)
             assert abs(float(g.params[key][i]) - float(fd)) < 1e-7, (key, i)
     # jacfwd with respect to the parameters works as well (forward mode)
     dT = jax.jacfwd(lambda r: jk.fk(r, Q))(robot)
@@ -102,13 +104,14 @@ def test_grad_with_respect_to_placement_parameters():
 
     g = jax.grad(f)(robot)
     h = 1e-6
+    f_of = jax.jit(f)  # the robot traced: one compile for every perturbed robot
     for key in ("xyz", "rpy"):
         for j in range(robot.n_joints):
             for k in range(3):
                 e = jnp.zeros((robot.n_joints, 3)).at[j, k].set(h)
-                fd = f(robot.replace(params={**robot.params, key: robot.params[key] + e})) - f(
-                    robot.replace(params={**robot.params, key: robot.params[key] - e})
-                )
+                plus = robot.replace(params={**robot.params, key: robot.params[key] + e})
+                minus = robot.replace(params={**robot.params, key: robot.params[key] - e})
+                fd = f_of(plus) - f_of(minus)
                 assert abs(float(g.params[key][j, k]) - float(fd) / (2 * h)) < 1e-7
 
 
@@ -141,6 +144,7 @@ def test_robot_pytree_has_only_float_leaves(robot):
 
 # --- float32 ------------------------------------------------------------------------------------
 @given(jkt.robots_and_configurations(1, 8, dtype=np.float32))
+@op_by_op
 def test_float32_within_float32_tolerance(robot_q):
     robot32, q = robot_q
     q32 = jnp.asarray(q, dtype=jnp.float32)

@@ -58,15 +58,14 @@ def test_rate_matrix_singularities_and_margin():
 @given(robot_q=jkt.robots_and_configurations(1, 7))
 def test_analytical_equals_blkdiag_Binv_geometric(rep, robot_q):
     robot, q = robot_q
-
-    @jax.jit  # one compile per random robot (eagerly: one per function)
-    def values(q):
+    with jax.disable_jit():  # op by op: a robot used once compiles nothing of its own
         Ja, margin = jk.analytical_jacobian(robot, q, rep, return_margin=True)
         phi = reps.from_matrix(jk.fk(robot, q)[:3, :3], rep)
         Jg = jk.geometric_jacobian(robot, q)
-        return Ja, margin, phi, Jg, jk.analytical_from_geometric(Jg, phi, rep), jk.fk_all(robot, q)
-
-    Ja, margin, phi, Jg, expected, Ts = jax.device_get(values(q))
+        expected = jk.analytical_from_geometric(Jg, phi, rep)
+        Ja, margin, phi, Jg, expected, Ts = jax.device_get(
+            (Ja, margin, phi, Jg, expected, jk.fk_all(robot, q))
+        )
     margin = float(margin)
     if margin < 1e-3:
         return  # covered by the singularity tests below
@@ -125,17 +124,13 @@ def test_analytical_chain_method_equals_full_jacfwd(rep, robot_q):
     jax.jacfwd through all of forward kinematics agree."""
     robot, q = robot_q
     point = [0.1, -0.2, 0.3]
-
-    @jax.jit  # one compile per random robot (eagerly: one per function)
-    def values(q):
+    with jax.disable_jit():  # op by op: a robot used once compiles nothing of its own
         Ja, margin = jk.analytical_jacobian(robot, q, rep, point=point, return_margin=True)
         Jf, _ = jk.analytical_jacobian(
             robot, q, rep, point=point, method="jacfwd", return_margin=True
         )
         phi = reps.from_matrix(jk.fk(robot, q)[:3, :3], rep)
-        return Ja, margin, Jf, phi, jk.fk_all(robot, q)
-
-    Ja, margin, Jf, phi, Ts = jax.device_get(values(q))
+        Ja, margin, Jf, phi, Ts = jax.device_get((Ja, margin, Jf, phi, jk.fk_all(robot, q)))
     margin = float(margin)
     if margin < 1e-3 or (rep == "rotvec" and np.linalg.norm(phi) > math.pi - 1e-3):
         return
