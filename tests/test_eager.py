@@ -64,6 +64,7 @@ def test_eager_equals_traced_and_compiles_once(puma, name):
         np.testing.assert_allclose(a, c[0], rtol=0, atol=1e-15 * max(1.0, np.abs(c).max()))
     assert not np.allclose(_leaves(again)[0], _leaves(first)[0])
     assert _jit.eager_cache_info()["entries"] == 1
+    _check_host_input(robot, q, qd, call, _leaves(first))  # on the executable compiled above
 
 
 def test_a_new_dtype_or_shape_compiles_once_more(puma):
@@ -157,14 +158,12 @@ def test_disable_jit_runs_op_by_op_and_caches_nothing(puma):
     )
 
 
-@pytest.mark.parametrize("name", sorted(CALLS))
-def test_host_input_gives_the_answer_and_dtype_of_jax_input(puma, name):
+def _check_host_input(robot, q, qd, call, expected):
     """numpy arrays and lists go to the executable as they are (no device round trip first):
-    the same numbers and dtypes as JAX arrays, integers take the robot's dtype, float64 input
-    becomes float32 while x64 is off (as jnp.asarray does), op by op too."""
-    robot, q, qd = puma
-    call = CALLS[name]
-    expected = _leaves(call(robot, q, qd))
+    the same numbers and dtypes as JAX arrays (``expected``: ``call(robot, q, qd)``), integers
+    take the robot's dtype, float64 input becomes float32 while x64 is off (as jnp.asarray
+    does), op by op too. Called by :func:`test_eager_equals_traced_and_compiles_once`, which
+    compiled the executable already."""
     for host in ((np.asarray(q), np.asarray(qd)), (np.asarray(q).tolist(), np.asarray(qd))):
         got = _leaves(call(robot, *host))
         for a, b in zip(got, expected, strict=True):
