@@ -7,7 +7,6 @@ with the committed file's, and every cell that outputs something must have outpu
 
 import importlib.util
 import pathlib
-import time
 
 import nbformat
 import pytest
@@ -21,9 +20,6 @@ build = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(build)
 
 SOURCES = build.sources()
-# Per notebook. On a quiet 2-core CPU each runs in well under a minute (05, a million
-# configurations, and 06 are the longest); the margin absorbs a busy machine.
-NOTEBOOK_BUDGET_S = 420
 REBUILD = "rebuild it: python notebooks/build.py {}"
 
 
@@ -90,10 +86,10 @@ def test_notebook_matches_its_source_runs_and_holds_its_outputs(path):
     source = build.from_source(path)
     assert build.cells(committed) == build.cells(source), REBUILD.format(path.stem)
 
-    start = time.perf_counter()
-    executed = build.execute(source)  # raises CellExecutionError on the first failing cell
-    elapsed = time.perf_counter() - start
-    assert elapsed < NOTEBOOK_BUDGET_S, f"{path.name} took {elapsed:.0f} s"
+    # raises CellExecutionError on the first failing cell, and nbclient's TimeoutError on a cell
+    # still running after build.CELL_TIMEOUT_S (a watchdog for a hang, not a speed check: speed
+    # is measured in bench/, never asserted as wall-clock time)
+    executed = build.execute(source)
 
     for k, (ran, kept) in enumerate(zip(executed.cells, committed.cells, strict=True)):
         if ran.cell_type != "code":
