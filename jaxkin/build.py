@@ -1,7 +1,9 @@
 """Building robots: every description (DH tables, joint lists, URDF, ...) becomes a
 :class:`~jaxkin.Robot` through one validated path.
 
-Parsers emit joint specs (mappings, see :func:`from_joints`) and call :func:`from_joints`; DH
+Parsers emit joint specs (mappings, see :func:`from_joints`), keep the part the user asked for
+with :func:`select` (the subtree below ``base`` or the chain to ``tip``, mimic leaders outside
+it, the default frame: one function for every file loader) and call :func:`from_joints`; DH
 tables go through :func:`from_dh`. Validation happens here, on the host, once, before any
 tracing; mimic joints are resolved here, once (:func:`resolve_mimics`).
 """
@@ -10,7 +12,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import jax
@@ -24,11 +26,14 @@ from .spatial import matrix_to_rpy_np, quaternion_to_matrix_np
 __all__ = [
     "TOOL_FLANGE",
     "MimicError",
+    "Selection",
+    "SelectionError",
     "end_frames",
     "from_dh",
     "from_joints",
     "resolve_dtype",
     "resolve_mimics",
+    "select",
 ]
 
 _DH_CONVENTIONS = {"standard": "dh_standard", "modified": "dh_modified"}
@@ -222,7 +227,7 @@ def from_joints(
     ``default_frames``: which frame ``frame=None`` means (:attr:`jaxkin.Robot.tip_frame`):
     ``()`` (default) the last frame; one frame name, that frame; several names, none (the
     robot branches: asking for the default raises, listing these candidates).
-    :func:`jaxkin.load_urdf` fills it in.
+    :func:`select` gives it (and ``leaders``) for a part of a larger description.
 
     >>> import jaxkin as jk
     >>> robot = jk.Robot.from_joints(
@@ -716,6 +721,147 @@ def end_frames(root: str, joints: Sequence[tuple[str, str, bool]]) -> tuple[str,
 
     ends = [child for _, child, moves in joints if moves and not moving_below[child]]
     return tuple(end_frame(child) for child in ends)
+
+
+class SelectionError(ModelError):
+    """A ``base``/``tip`` that :func:`select` cannot honour: ``problem`` is ``"base"`` or
+    ``"tip"`` (``name`` is not a frame of the description) or ``"not_below"`` (the tip ``name``
+    is not below the base). The loaders reword it with their file's context."""
+
+    def __init__(self, message: str, problem: str, name: Any) -> None:
+        super().__init__(message)
+        self.problem, self.name = problem, name
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.problem, self.name))
+
+
+class Selection(NamedTuple):
+    """What :func:`select` keeps: the arguments of :func:`from_joints` (``joints``, ``root``,
+    ``leaders``, ``default_frames``) and ``index``, the positions of the kept joints in the
+    description (parents first; the joint ``above`` is not one of them)."""
+
+    root: str
+    joints: list[dict[str, Any]]
+    leaders: list[dict[str, Any]]
+    default_frames: tuple[str, ...]
+    index: tuple[int, ...]
+
+
+def select(
+    joints: Sequence[Mapping[str, Any]],
+    root: str,
+    base: str | None = None,
+    tip: str | None = None,
+    *,
+    mimics: Callable[[set[str]], Mapping[str, Mapping[str, Any]]] | None = None,
+    above: Mapping[str, Any] | None = None,
+) -> Selection:
+    """The part of a description that a loader builds: the one selection of every file loader
+    (``jk.load_urdf``, xacro included, and ``jk.load_mjcf``), for :func:`from_joints`.
+
+    ``joints`` are the :func:`from_joints` specs of the whole description (each with its
+    ``parent``), a tree below the frame ``root``. Kept: the subtree below ``base`` (default
+    ``root``), depth-first with siblings in the given order, or with ``tip`` the chain from
+    ``base`` to ``tip``. ``above``: a joint spec put above the kept part (its ``child`` is set
+    to the part's root; its ``parent`` becomes the root of the result), e.g. a free joint.
+
+    Mimic joints: ``mimics(names)`` gives the ``mimic`` mapping of each of the joints ``names``
+    that follows another (default: their specs' own ``mimic``); it is asked for the kept moving
+    joints, then again with each revolute or prismatic joint outside the part that drives one
+    of them (followed to the end of its chain). Those become ``leaders`` (sorted by name), and
+    the kept specs (copies) get their ``mimic`` from it. ``default_frames`` is
+    :func:`end_frames` of the result.
+
+    Raises :class:`SelectionError` naming the ``base`` or ``tip`` that is not a frame, or a tip
+    that is not below the base; the loaders add their file's context.
+
+    >>> import jaxkin as jk
+    >>> from jaxkin.build import select
+    >>> joints = [
+    ...     dict(name="j1", type="revolute", parent="base", child="a"),
+    ...     dict(name="j2", type="revolute", parent="a", child="b", xyz=[1, 0, 0]),
+    ...     dict(name="finger", type="revolute", parent="a", child="f", mimic={"joint": "j1"}),
+    ... ]
+    >>> part = select(joints, "base", base="a", tip="f")  # the finger, driven by j1 outside
+    >>> part.root, [s["name"] for s in part.joints], [s["name"] for s in part.leaders]
+    ('a', ['finger'], ['j1'])
+    >>> robot = jk.Robot.from_joints(
+    ...     part.joints, root=part.root, leaders=part.leaders, default_frames=part.default_frames
+    ... )
+    >>> robot.joint_names, robot.frame_names, robot.frame_names[robot.tip_frame]
+    (('j1',), ('a', 'f'), 'f')
+    """
+    frames = {root, *(s["child"] for s in joints)}
+    for what, name in (("base", base), ("tip", tip)):
+        if name is not None and (not isinstance(name, str) or name not in frames):
+            raise SelectionError(f"{what}={name!r} is not a frame of the description.", what, name)
+    start = root if base is None else base
+    index = _subtree(joints, start) if tip is None else _chain(joints, start, tip)
+    kept = [dict(joints[i]) for i in index]
+    if above is not None:
+        kept.insert(0, {**above, "child": start})
+        start = above["parent"]
+    mimic, leaders = _leaders(joints, kept, mimics)
+    for s in kept:
+        if s["name"] in mimic:
+            s["mimic"] = mimic[s["name"]]
+    ends = end_frames(start, [(s["parent"], s["child"], s["type"] != "fixed") for s in kept])
+    return Selection(start, kept, leaders, ends, tuple(index))
+
+
+def _subtree(joints: Sequence[Mapping[str, Any]], start: str) -> list[int]:
+    """The positions of the joints below ``start``, depth-first (siblings in order)."""
+    children: dict[str, list[int]] = {}
+    for i, s in enumerate(joints):
+        children.setdefault(s["parent"], []).append(i)
+    out, stack = [], list(reversed(children.get(start, [])))
+    while stack:
+        i = stack.pop()
+        out.append(i)
+        stack.extend(reversed(children.get(joints[i]["child"], [])))
+    return out
+
+
+def _chain(joints: Sequence[Mapping[str, Any]], start: str, tip: str) -> list[int]:
+    """The positions of the joints from ``start`` down to ``tip``, parents first."""
+    parent_joint = {s["child"]: i for i, s in enumerate(joints)}
+    path, frame = [], tip
+    while frame != start:
+        if frame not in parent_joint:
+            raise SelectionError(f"tip {tip!r} is not below base {start!r}.", "not_below", tip)
+        path.append(parent_joint[frame])
+        frame = joints[path[-1]]["parent"]
+    return path[::-1]
+
+
+def _leaders(joints, kept, mimics) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The mimics of the kept joints and of the joints outside that drive them, and those
+    leaders as :func:`from_joints` takes them (see :func:`select`)."""
+    if mimics is None:
+        own = {s["name"]: s["mimic"] for s in joints if s.get("mimic") is not None}
+
+        def mimics(names: set[str]) -> dict[str, Any]:
+            return {n: own[n] for n in names if n in own}
+
+    moving = {s["name"]: s for s in joints if s["type"] in ("revolute", "prismatic")}
+    selected = {s["name"] for s in kept if s["type"] != "fixed"}
+    coupled = set(selected)
+    mimic = mimics(coupled)
+    while True:  # a leader outside may itself follow a joint outside (or inside)
+        outside = ({m["joint"] for m in mimic.values()} - coupled) & set(moving)
+        if not outside:
+            break
+        coupled |= outside
+        mimic = mimics(coupled)
+    leaders = []
+    for name in sorted(coupled - selected):
+        spec = moving[name]
+        leader = {k: spec[k] for k in ("name", "type", "lower", "upper") if k in spec}
+        if name in mimic:
+            leader["mimic"] = mimic[name]
+        leaders.append(leader)
+    return dict(mimic), leaders
 
 
 def _limit(value: Any, where: str) -> float:

@@ -42,7 +42,6 @@ import re
 import sys
 from collections.abc import Iterator, Sequence
 from typing import Any
-from xml.parsers import expat
 
 import jax
 import numpy as np
@@ -53,6 +52,7 @@ from .batch import MapStats, ProgressBar, chunked_map
 from .io import MAX_INPUT_BYTES, ResultWriter, csv_record, read_configurations
 from .jacobians import REFERENCES
 from .representations import REPRESENTATIONS
+from .robots.files import NAME_PREFIXES, XACRO_SUFFIX
 from .sampling import SAMPLE_BLOCK, sample_rows
 from .velocity import velocity_results
 
@@ -76,12 +76,6 @@ MAX_N = 100_000_000
 MAX_CHUNK = 1 << 20
 MAX_DIGITS = 17  # float64 round-trips with 17 significant digits; more print noise
 MAX_SEED = 2**32 - 1
-URDF_SUFFIXES = (".urdf", ".xml", ".xacro")
-XACRO_SUFFIX = ".xacro"
-# Names with these prefixes are robots of jk.robots (example-robot-data, MJCF packages) unless a
-# file of that name exists: a mistyped one gets the library's suggestions, not "no such file".
-NAME_PREFIXES = ("erd/", "mjcf/")
-SNIFF_BYTES = 1 << 16  # bytes of a robot file read to find its root element (URDF or MJCF)
 OUTPUT_FORMATS = ("npz", "csv")
 
 
@@ -624,26 +618,21 @@ def load_robot(
     *,
     trust_xacro: bool = False,
 ):
-    """The robot ``spec`` names: a zoo name, an ``erd/...`` or ``mjcf/...`` name, or the path of
-    a URDF or MJCF file (:func:`jaxkin.load_mjcf` when its root element is ``<mujoco>``) or, with
-    ``trust_xacro``, of a ``.xacro`` file (expanded by the xacro package, which runs the file's
-    code: refused without consent).
+    """The robot ``spec`` names, through :func:`jaxkin.robots.load`: a zoo name, an ``erd/...``
+    or ``mjcf/...`` name, or the path of a URDF or MJCF file or, with ``trust_xacro``, of a
+    ``.xacro`` file (expanded by the xacro package, which runs the file's code: refused without
+    consent). Names win over files (:mod:`jaxkin.robots.files`).
 
-    Names win over files: a file called like a zoo robot needs a path (``./niryo_one``); a spec
-    with a prefix of ``NAME_PREFIXES``, no file suffix and no file of that name is a robot name
-    (a mistyped one gets the library's suggestions). Returns ``(robot, label)``; ``label``
-    names output files. Every user mistake is a :class:`UsageError` or a
-    :class:`jaxkin.JaxkinError` (a bad file's message names it).
+    Returns ``(robot, label)``; ``label`` names output files. Every user mistake is a
+    :class:`UsageError` or a :class:`jaxkin.JaxkinError` (a bad file's message names it).
     """
     zoo = jk.robots.names()
-    urdf = jk.robots.erd_names()
-    named = spec in zoo or spec in urdf or spec in jk.robots.mjcf_names()
-    name_like = spec.startswith(NAME_PREFIXES) and not spec.lower().endswith(URDF_SUFFIXES)
-    if not named and not (name_like and not os.path.lexists(spec)):
+    if jk.robots.files.is_path(spec):
         path = pathlib.Path(spec)
-        if spec.lower().endswith(URDF_SUFFIXES) or os.sep in spec or os.path.lexists(spec):
-            robot = _load_file(path, dtype, tip, base, trust_xacro)
-            return _movable(robot, spec), pathlib.Path(path.name.removesuffix(XACRO_SUFFIX)).stem
+        robot = _load_file(path, dtype, tip, base, trust_xacro)
+        return _movable(robot, spec), pathlib.Path(path.name.removesuffix(XACRO_SUFFIX)).stem
+    if spec not in zoo and not spec.startswith(NAME_PREFIXES):
+        urdf = jk.robots.erd_names()
         more = f" or one of {len(urdf)} erd/... URDF robots" if urdf else ""
         raise UsageError(
             f"unknown robot {spec!r}; choose one of {', '.join(zoo)}{more}, or give a URDF or "
@@ -692,40 +681,9 @@ def _load_file(path: pathlib.Path, dtype: str, tip: str | None, base: str | None
             f"or expand it yourself (xacro {path} > robot.urdf) and pass the .urdf"
         )
     try:
-        if not xacro and _root_tag(path) == "mujoco":
-            return jk.load_mjcf(path, tip=tip, base=base, dtype=dtype)
-        return jk.load_urdf(path, tip=tip, base=base, dtype=dtype, trust=trust)
+        return jk.robots.load(path, dtype=dtype, tip=tip, base=base, trust=trust)
     except OSError as e:
         raise UsageError(f"cannot read {path}: {e.strerror or e}") from None
-
-
-class _RootFound(Exception):
-    """Stops the parse of :func:`_root_tag` at the first element."""
-
-
-def _root_tag(path: pathlib.Path) -> str | None:
-    """The name of the first element of the XML file ``path``, from at most ``SNIFF_BYTES`` of
-    it; None when they hold none, a DTD comes first or it is not XML (the URDF loader then says
-    what is wrong). Only the start of a regular file is read; nothing is expanded."""
-    if not path.is_file():
-        return None
-    found: list[str] = []
-
-    def start(name: str, attributes: Any) -> None:
-        found.append(name)
-        raise _RootFound
-
-    def doctype(*args: Any) -> None:
-        raise _RootFound  # no DTD is processed here; the loaders refuse or handle it
-
-    parser = expat.ParserCreate()
-    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    parser.StartElementHandler, parser.StartDoctypeDeclHandler = start, doctype
-    with open(path, "rb") as f:
-        head = f.read(SNIFF_BYTES)
-    with contextlib.suppress(_RootFound, expat.ExpatError):
-        parser.Parse(head, False)
-    return found[0] if found else None
 
 
 # ---------------------------------------------------------------------- velocities

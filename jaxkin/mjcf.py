@@ -91,13 +91,13 @@ import math
 import os
 import stat
 import xml.parsers.expat
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .build import end_frames
+from .build import SelectionError, select
 from .errors import JaxkinError, ModelError
 from .model import Robot
 from .spatial import make_transform_np, quaternion_to_matrix_np, rotation_about_axis_np
@@ -475,43 +475,22 @@ def _all_specs(mujoco, m, label: str) -> tuple[list[dict[str, Any]], dict[str, s
     return specs, {s["child"]: s["parent"] for s in specs}
 
 
-def _order(specs: list[dict[str, Any]], root: str) -> list[dict[str, Any]]:
-    """The specs below ``root``, depth-first (parents first, siblings in order)."""
-    children: dict[str, list[dict[str, Any]]] = {}
-    for s in specs:
-        children.setdefault(s["parent"], []).append(s)
-    out, stack = [], list(reversed(children.get(root, [])))
-    while stack:
-        s = stack.pop()
-        out.append(s)
-        stack.extend(reversed(children.get(s["child"], [])))
-    return out
-
-
-def _select(specs, parent_of, root: str, tip: str | None, label: str, known: Sequence[str]):
-    for what, name in (("base", root), ("tip", tip)):
-        if name is not None and name not in known:
-            shown = list(known[:8])
-            raise MJCFError(
-                f"{label}: {what}={name!r} is not a {'body' if what == 'base' else 'body or site'}"
-                f" of the model (frames: {shown}{' ...' if len(known) > 8 else ''}).",
-                file=label,
-            )
-    below = _order(specs, root)
-    if tip is None:
-        return below
-    by_child = {s["child"]: s for s in below}
-    if tip != root and tip not in by_child:
-        raise MJCFError(
-            f"{label}: tip {tip!r} is not below base {root!r}; choose a base that is an "
+def _selection_error(label: str, e: SelectionError, root: str, known: Sequence[str]):
+    """:func:`jaxkin.build.select`'s refusal (or a ``base`` that is not a body: ``known`` are
+    the bodies), with the file's label."""
+    if e.problem == "not_below":
+        return MJCFError(
+            f"{label}: tip {e.name!r} is not below base {root!r}; choose a base that is an "
             "ancestor of the tip (or leave base=None).",
             file=label,
         )
-    path, frame = [], tip
-    while frame != root:
-        path.append(by_child[frame])
-        frame = parent_of[frame]
-    return path[::-1]
+    shown = list(known[:8])
+    return MJCFError(
+        f"{label}: {e.problem}={e.name!r} is not a "
+        f"{'body' if e.problem == 'base' else 'body or site'}"
+        f" of the model (frames: {shown}{' ...' if len(known) > 8 else ''}).",
+        file=label,
+    )
 
 
 def _couplings(mujoco, m, label: str, selected: set[str], joint_names: list[str]):
@@ -583,12 +562,6 @@ def _tendon_joints(mujoco, m, joint_names: list[str]) -> list[list[str]]:
     return out
 
 
-def _default_frames(root: str, specs: Sequence[Mapping[str, Any]]) -> tuple[str, ...]:
-    """The end frames of the moving joints' branches: the file loaders' one rule
-    (:func:`jaxkin.build.end_frames`; see "The default frame")."""
-    return end_frames(root, [(s["parent"], s["child"], s["type"] != "fixed") for s in specs])
-
-
 def load_mjcf(
     source: Any,
     tip: str | None = None,
@@ -643,39 +616,26 @@ def load_mjcf(
     root = "world" if base is None else base
     body_names, joint_names, _ = _names(mujoco, m)
     if base is not None and base not in body_names:
-        _select(specs, parent_of, base, None, label, body_names)  # raises, naming base
-    chosen = _select(specs, parent_of, root, tip, label, ["world", *parent_of])
-    selected = {s["name"] for s in chosen if s["type"] != "fixed"}
-    all_moving = {s["name"]: s for s in specs if s["type"] in ("revolute", "prismatic")}
-    # The couplings of the loaded joints, and of every joint outside the part that drives them,
-    # followed to the end of its chain (a leader outside may itself follow a joint inside).
-    coupled = set(selected)
-    mimic = _couplings(mujoco, m, label, coupled, joint_names)
-    while True:
-        outside = {c["joint"] for c in mimic.values()} - coupled
-        outside &= set(all_moving)
-        if not outside:
-            break
-        coupled |= outside
-        mimic = _couplings(mujoco, m, label, coupled, joint_names)
-    leaders: dict[str, dict[str, Any]] = {}
-    for name in sorted(coupled - selected):
-        src = all_moving[name]
-        leaders[name] = {k: src[k] for k in ("name", "type", "lower", "upper")}
-        if name in mimic:
-            leaders[name]["mimic"] = mimic[name]
-    for s in chosen:
-        if s["name"] in mimic:
-            s["mimic"] = mimic[s["name"]]
-    out = [dict(s) for s in chosen]
+        problem = SelectionError("", "base", base)
+        raise _selection_error(label, problem, root, body_names)
+    try:
+        sel = select(
+            specs,
+            "world",
+            base,
+            tip,
+            mimics=lambda names: _couplings(mujoco, m, label, names, joint_names),
+        )
+    except SelectionError as e:
+        raise _selection_error(label, e, root, ["world", *parent_of]) from None
     try:
         return Robot.from_joints(
-            out,
-            root=root,
+            sel.joints,
+            root=sel.root,
             name=name or model_name or "mjcf",
             dtype=dtype,
-            leaders=list(leaders.values()),
-            default_frames=_default_frames(root, out),
+            leaders=sel.leaders,
+            default_frames=sel.default_frames,
         )
     except MJCFError:
         raise

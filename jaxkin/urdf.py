@@ -121,7 +121,7 @@ from pathlib import Path
 from typing import Any
 from xml.parsers import expat
 
-from .build import MimicError, end_frames, resolve_mimics
+from .build import MimicError, Selection, SelectionError, resolve_mimics, select
 from .errors import ModelError
 from .model import Robot
 
@@ -1112,47 +1112,51 @@ def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
 
 
 # ---------------------------------------------------------------------------------- building
+_FREE_ROOT = {
+    "name": ROOT_JOINT,
+    "type": "free",
+    "parent": UNIVERSE,
+    "xyz": (0.0,) * 3,
+    "rpy": (0.0,) * 3,
+}
+"""The spec of the free joint ``floating_base=True`` puts above the selection (its child is set
+by :func:`jaxkin.build.select`)."""
+
+
 def _select(
     model: URDFModel, tip: str | None, base: str | None, ctx: _Context, floating: bool = False
-) -> tuple[str, list[URDFJoint]]:
-    """The root link and the joints (parents first) of the selected chain or subtree; a ``base``
-    below which the selection has no moving joint is refused (:func:`_refuse_motionless`)."""
-    start, joints = _select_joints(model, tip, base, ctx)
+) -> tuple[Selection, list[URDFJoint]]:
+    """The selected chain or subtree (:func:`jaxkin.build.select`, with a free joint above it
+    when ``floating``) and its URDF joints (parents first); a ``base`` below which the selection
+    has no moving joint is refused (:func:`_refuse_motionless`)."""
+    above = _FREE_ROOT if floating else None
+    try:
+        sel = select([_joint_spec(j) for j in model.joints], model.root, base, tip, above=above)
+    except SelectionError as e:
+        raise _selection_error(model, ctx, e, base) from None
+    joints = [model.joints[i] for i in sel.index]
     if base is not None and not floating:
         _refuse_motionless(model, tip, base, joints, ctx)
-    return start, joints
+    return sel, joints
 
 
-def _select_joints(
-    model: URDFModel, tip: str | None, base: str | None, ctx: _Context
-) -> tuple[str, list[URDFJoint]]:
-    """The root link and the joints (parents first) of the selected chain or subtree."""
+def _selection_error(
+    model: URDFModel, ctx: _Context, e: SelectionError, base: str | None
+) -> URDFError:
+    """:func:`jaxkin.build.select`'s refusal, with the file's context."""
+    if e.problem == "not_below":
+        start = model.root if base is None else base
+        return ctx.error(
+            f"tip {e.name!r} is not below base {start!r}: the path from the root "
+            f"{model.root!r} to {e.name!r} does not pass through {start!r}.",
+            fix="choose a base link that is an ancestor of the tip (or leave base=None).",
+        )
     names = model.link_names
-    for what, link in (("base", base), ("tip", tip)):
-        if link is not None and (not isinstance(link, str) or link not in names):
-            raise ctx.error(
-                f"{what}={link!r} is not a link of robot {model.name!r}."
-                f"{_suggest(str(link), names)}",
-                fix=f"pass the name of a link ({len(names)} links, e.g. {list(names[:5])}).",
-            )
-    start = model.root if base is None else base
-    if tip is None:
-        return start, list(model.depth_first(start))
-    parent_joint = {j.child: j for j in model.joints}
-    path: list[URDFJoint] = []
-    link = tip
-    while link != start:
-        if link not in parent_joint:
-            raise ctx.error(
-                f"tip {tip!r} is not below base {start!r}: the path from the root "
-                f"{model.root!r} to {tip!r} does not pass through {start!r}.",
-                fix="choose a base link that is an ancestor of the tip (or leave base=None).",
-            )
-        j = parent_joint[link]
-        path.append(j)
-        link = j.parent
-    path.reverse()
-    return start, path
+    return ctx.error(
+        f"{e.problem}={e.name!r} is not a link of robot {model.name!r}."
+        f"{_suggest(str(e.name), names)}",
+        fix=f"pass the name of a link ({len(names)} links, e.g. {list(names[:5])}).",
+    )
 
 
 def _refuse_motionless(
@@ -1283,53 +1287,23 @@ def load_urdf(
     else:
         model = parse_urdf(source, max_bytes=max_bytes)
     ctx = _Context(model.file)
-    root, joints = _select(model, tip, base, ctx, floating_base)
+    sel, joints = _select(model, tip, base, ctx, floating_base)
     _refuse_unsupported(ctx, joints)
-    if floating_base:
-        if UNIVERSE in model.link_names or ROOT_JOINT in model.joint_map:
-            clash = UNIVERSE if UNIVERSE in model.link_names else ROOT_JOINT
-            raise ctx.error(
-                f"floating_base=True adds a base frame {UNIVERSE!r} and a free joint "
-                f"{ROOT_JOINT!r}, but the file already has a link or joint named {clash!r}.",
-                fix="rename it in the file, or load without floating_base.",
-            )
-        free = URDFJoint(
-            name=ROOT_JOINT,
-            type="floating",
-            parent=UNIVERSE,
-            child=root,
-            xyz=(0.0, 0.0, 0.0),
-            rpy=(0.0, 0.0, 0.0),
-            axis=(1.0, 0.0, 0.0),
-            lower=math.nan,
-            upper=math.nan,
-            mimic=None,
-            line=None,
+    if floating_base and (UNIVERSE in model.link_names or ROOT_JOINT in model.joint_map):
+        clash = UNIVERSE if UNIVERSE in model.link_names else ROOT_JOINT
+        raise ctx.error(
+            f"floating_base=True adds a base frame {UNIVERSE!r} and a free joint "
+            f"{ROOT_JOINT!r}, but the file already has a link or joint named {clash!r}.",
+            fix="rename it in the file, or load without floating_base.",
         )
-        root, joints = UNIVERSE, [free, *joints]
-    selected = {j.name for j in joints}
-    specs = [_joint_spec(j) for j in joints]
-    # Joints outside the selection that drive selected mimic joints, with their own mimics.
-    leaders = []
-    for j in model.depth_first():
-        if j.name not in selected and j.type in MOVING_TYPES:
-            leaders.append(
-                {
-                    k: v
-                    for k, v in _joint_spec(j).items()
-                    if k in ("name", "type", "lower", "upper", "mimic")
-                }
-            )
-    follows = {s["mimic"]["joint"] for s in specs + leaders if "mimic" in s}
-    leaders = [s for s in leaders if s["name"] in follows]
     try:
         return Robot.from_joints(
-            specs,
-            root=root,
+            sel.joints,
+            root=sel.root,
             name=name or model.name,
             dtype=dtype,
-            leaders=leaders,
-            default_frames=_default_frames(root, joints),
+            leaders=sel.leaders,
+            default_frames=sel.default_frames,
         )
     except URDFError:
         raise
@@ -1593,14 +1567,6 @@ def _parse_xacro(source: Any, args: Mapping[str, Any], max_bytes: int, trust: bo
 def _check_max_bytes(max_bytes: Any) -> None:
     if not isinstance(max_bytes, int) or isinstance(max_bytes, bool) or max_bytes <= 0:
         raise ModelError(f"max_bytes must be a positive integer, got {max_bytes!r}.")
-
-
-def _default_frames(root: str, joints: Sequence[URDFJoint]) -> tuple[str, ...]:
-    """The default frame of the robot made of ``joints`` (parents first, below ``root``), as
-    ``(link,)``, or the candidate end frames when its moving joints branch (see "The default
-    frame" in the module doc; the rule is :func:`jaxkin.build.end_frames`). No moving joint
-    (dof 0): ``()``, the last frame, as for any robot without a choice."""
-    return end_frames(root, [(j.parent, j.child, j.type != "fixed") for j in joints])
 
 
 def _joint_spec(j: URDFJoint) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 """The built-in robot zoo.
 
-``jk.robots.load(name, dtype=None, **params)`` builds a zoo robot; ``jk.robots.names()`` lists
+``jk.robots.load(name, dtype=None, **params)`` builds a zoo robot, or loads a robot file given
+its path (URDF, MJCF, xacro: :mod:`jaxkin.robots.files`); ``jk.robots.names()`` lists
 them; ``jk.robots.info(name)`` tells where its numbers come from (``source``) and, for robots
 loaded from a file, where that file is (``path``). Robots whose dimensions are
 symbols in the textbook (the chapter's examples) take them as keyword arguments, e.g.
@@ -152,8 +153,22 @@ def info(name: str) -> ZooEntry:
         ) from None
 
 
-def load(name: str, dtype: Any = None, **params: Any) -> Robot:
-    """Build the zoo robot ``name`` (see :func:`names`), optionally with its symbolic dimensions."""
+def load(name: Any, /, dtype: Any = None, **params: Any) -> Robot:
+    """The robot ``name`` names: a zoo robot (see :func:`names`), optionally with its symbolic
+    dimensions, an ``"erd/..."`` or ``"mjcf/..."`` robot (``tip=``, ``base=``), or a file: the
+    path of a URDF, MJCF or xacro file (``tip=``, ``base=``, ``name=``, and ``trust=True`` for
+    xacro, which runs the file's code), loaded with :func:`jaxkin.load_urdf` or
+    :func:`jaxkin.load_mjcf` (the root element decides; see :mod:`jaxkin.robots.files` for
+    how a name is told from a path: names win), e.g.
+    ``jk.robots.load("robot.urdf", tip="tool0")`` is ``jk.load_urdf("robot.urdf", tip="tool0")``.
+
+    >>> import jaxkin as jk
+    >>> robot = jk.robots.load("two_link_planar", a1=1.0, a2=0.5)
+    >>> robot.dof, robot.name
+    (2, 'two_link_planar')
+    """
+    if files.is_path(name):
+        return files.load(name, dtype=dtype, **params)
     entry = info(name)
     allowed = entry.parameters
     unknown = set(params) - set(allowed)
@@ -166,6 +181,7 @@ def load(name: str, dtype: Any = None, **params: Any) -> Robot:
 # Entries register themselves on import.
 from . import chapter as chapter  # noqa: E402
 from . import example_robot_data as example_robot_data  # noqa: E402
+from . import files as files  # noqa: E402
 from . import industrial as industrial  # noqa: E402
 from . import mjcf as mjcf  # noqa: E402
 from . import niryo_one as niryo_one  # noqa: E402
