@@ -1,4 +1,5 @@
-"""Private: every input check and the one notion of "traced", written once.
+"""Private: every input check, written once (the one notion of "traced", :func:`is_traced`,
+lives in :mod:`jaxkin._traces`, below the model, and is re-exported here).
 
 Public functions check their arguments here at entry, once; kernels take checked arrays and do
 not check again. Checks run in Python before tracing and raise :class:`~jaxkin.ShapeError` or
@@ -22,27 +23,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._traces import is_traced, is_tracer
 from .errors import JaxkinError, ShapeError
 from .model import Robot
 
 REFERENCES = ("world_aligned", "local", "world")
 _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
-
-
-# ----------------------------------------------------------------------------- traces
-def is_traced(*trees: Any) -> bool:
-    """True when some leaf of ``trees`` is a JAX tracer (the call is inside a transformation)."""
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
-
-
-def inside_trace() -> bool:
-    """True while JAX is tracing (``jit``/``vmap``/``grad``), even when no argument is traced."""
-    try:
-        from jax._src import core
-
-        return not core.trace_state_clean()
-    except Exception:  # pragma: no cover - private API moved: assume nested
-        return True
 
 
 def error_if(bad: Any, error: Callable[[], Exception], value: Any, *trees: Any) -> Any:
@@ -113,6 +99,26 @@ def finite_guard(fn: str, **inputs: Any) -> FiniteGuard:
     arrays = [jnp.asarray(x) for x in inputs.values()]
     ok = [jnp.all(jnp.isfinite(x)) for x in arrays if jnp.issubdtype(x.dtype, jnp.inexact)]
     return FiniteGuard(~jnp.all(jnp.stack(ok)) if ok else False)
+
+
+def refuse_nonfinite(x: Any, what: str, fn: str) -> None:
+    """Eagerly: raise :class:`~jaxkin.JaxkinError` when ``x`` holds NaN or inf, for inputs that
+    must be finite whose traced values a kernel handles itself (IK's ``nonfinite`` result code).
+    A traced ``x`` is not checked."""
+    if not is_traced(x) and not np.all(np.isfinite(np.asarray(x, dtype=np.float64))):
+        raise JaxkinError(f"{fn}: {what} contains NaN or inf.")
+
+
+def host_side(fn: str, **inputs: Any) -> None:
+    """The non-finite policy (module doc) for a host-side result (a Python string, say): it
+    cannot be poisoned, so a traced input raises too, and a concrete non-finite one raises as
+    :func:`finite_guard` does."""
+    if is_traced(*inputs.values()):
+        raise JaxkinError(
+            f"{fn} returns a Python string, so it works on concrete values only: call it outside "
+            "jit/vmap/grad (e.g. on jax.device_get of the traced result)."
+        )
+    finite_guard(fn, **inputs)
 
 
 # ----------------------------------------------------------------------------- dtypes and math
@@ -203,12 +209,7 @@ def check_q(
     """
     check_robot(robot, fn)
     nq = robot.nq
-    if (
-        isinstance(q, jax.Array)
-        and not isinstance(q, jax.core.Tracer)
-        and q.shape == (nq,)
-        and q.dtype in _FLOATS
-    ):
+    if isinstance(q, jax.Array) and not is_tracer(q) and q.shape == (nq,) and q.dtype in _FLOATS:
         if robot.nq != robot.nv:
             check_rotations(robot, q, what, fn)
         return q  # the common case, fast: eager calls must not cost milliseconds
@@ -416,8 +417,7 @@ def check_poses(T: Any, fn: str, what: str, dtype: Any, batch: str = "optional")
         raise ShapeError(f"{fn}: {what} must have shape {allowed}, got {shape}.")
     if not is_traced(T):
         Tn = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
-        if not np.all(np.isfinite(Tn)):
-            raise JaxkinError(f"{fn}: {what} contains NaN or inf.")
+        refuse_nonfinite(Tn, what, fn)
         bad = rigid_transform_errors(Tn)
         if bad.size:
             raise JaxkinError(
@@ -426,3 +426,11 @@ def check_poses(T: Any, fn: str, what: str, dtype: Any, batch: str = "optional")
                 "[0, 0, 0, 1]). Build it with jk.fk or jk.spatial.make_transform."
             )
     return jnp.asarray(T, dtype=dtype), batched
+
+
+def check_path(Ts: Any, what: str, fn: str) -> Any:
+    """A path of N >= 2 poses: ``Ts`` (an array) itself when its shape is (N, 4, 4), else a
+    :class:`~jaxkin.ShapeError`."""
+    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
+        raise ShapeError(f"{fn}: {what} must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
+    return Ts

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import inside_trace, is_traced
+from ._traces import inside_trace, is_traced
 
 _OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 

@@ -635,10 +635,9 @@ def wrist_decoupling(
     q = check_q(robot, q, fn=fn, batch_hint=f"jax.vmap(lambda q: {fn}(robot, q, threshold))(qs)")
     guard = finite_guard(fn, q=q, threshold=threshold)
     q = guard.clean(q)
-    J = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned").matrix()
-    fp = forward_pass(robot, q)  # joint axes and origins, shared with the wrist centre
-    p = fp.p[robot.frame_index(frame)]
-    c, dist = _wrist_centre(fp, wrist_model)
+    g = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned")
+    J, p = g.matrix(), g.pose()[:3, 3]  # the frame's origin from the Jacobian's own pass
+    c, dist = _wrist_centre(forward_pass(robot, q), wrist_model)  # joint axes and origins
     r = c - p
     Jv_c = J[:3] + jnp.cross(J[3:].T, r).T  # omega x r per column
     J11 = Jv_c[:, jnp.array(arm)]

@@ -11,16 +11,14 @@ tracing; mimic joints are resolved here, once (:func:`resolve_mimics`).
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import JaxkinPrecisionWarning, ModelError
-from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot
+from .errors import ModelError
+from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot, resolve_dtype
 from .spatial import matrix_to_rpy_np, quaternion_to_matrix_np
 
 __all__ = [
@@ -31,36 +29,11 @@ __all__ = [
     "end_frames",
     "from_dh",
     "from_joints",
-    "resolve_dtype",
     "resolve_mimics",
     "select",
 ]
 
 _DH_CONVENTIONS = {"standard": "dh_standard", "modified": "dh_modified"}
-
-
-def resolve_dtype(dtype: Any = None) -> np.dtype:
-    """The float dtype to build with: ``dtype`` or JAX's default float.
-
-    Asking for float64 while ``jax_enable_x64`` is off warns (:class:`JaxkinPrecisionWarning`) and
-    returns float32; jaxkin never changes the global JAX configuration.
-    """
-    default = np.dtype(jnp.result_type(float))
-    if dtype is None:
-        return default
-    dt = np.dtype(dtype)
-    if not np.issubdtype(dt, np.floating) or dt.itemsize not in (4, 8):
-        raise ModelError(f"dtype must be float32 or float64, got {dt}.")
-    if dt == np.float64 and not jax.config.read("jax_enable_x64"):
-        warnings.warn(
-            "float64 was requested but jax_enable_x64 is off, so JAX computes in float32. "
-            "Enable it at program start with jax.config.update('jax_enable_x64', True) "
-            "(jaxkin never changes the global JAX configuration).",
-            JaxkinPrecisionWarning,
-            stacklevel=3,
-        )
-        return np.dtype(np.float32)
-    return dt
 
 
 def from_dh(

@@ -41,7 +41,7 @@ from . import spatial
 from ._checks import check_poses, finite_guard, is_traced, refuse_multi_dof
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .kinematics import forward_pass
+from .kinematics import forward_pass, frame_pose
 from .model import Robot
 from .optimizers import default_optimizer
 from .pose_errors import pose_residual
@@ -190,6 +190,8 @@ def _pose_residuals(robot: Robot, qs, Ts, f: int, wp, wo) -> jax.Array:
     """Weighted residuals (M, 6): ``[dp / sigma_p; log(R_m R^T) / sigma_o]``."""
 
     def one(q, T):
+        # The full forward pass, not frame_pose: calibrate's compiled loop (line search included)
+        # fuses differently around the path-only pass, moving fits by ~1e-13 (not bit-identical).
         fp = forward_pass(robot, q)
         e = pose_residual(spatial.make_transform(fp.R[f], fp.p[f]), T)
         return jnp.concatenate([e[:3] * wp, e[3:] * wo])
@@ -244,8 +246,8 @@ def _regressor_impl(robot, qs, theta0, wp, wo, *, masks_key, f):
         r = _apply(robot, masks, theta)
 
         def one(q):
-            fp = forward_pass(r, q)
-            return fp.p[f], fp.R[f]
+            R, p = frame_pose(r, q, f)
+            return p, R
 
         return jax.vmap(one)(qs)
 

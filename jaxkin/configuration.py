@@ -47,8 +47,7 @@ import numpy as np
 
 from ._checks import check_q, check_robot, check_scalar, check_v, result_dtype
 from ._jit import eager
-from .build import resolve_dtype
-from .model import COORDINATES, JOINT_SIZES, Robot
+from .model import COORDINATES, JOINT_SIZES, Robot, resolve_dtype
 from .spatial import (
     left_jacobian_so3,
     left_jacobian_so3_inverse,

@@ -49,12 +49,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import sampling, spatial
-from ._checks import check_poses, check_q, check_robot, is_traced, refuse_multi_dof
+from ._checks import (
+    check_poses,
+    check_q,
+    check_robot,
+    is_traced,
+    refuse_multi_dof,
+    refuse_nonfinite,
+)
 from ._jit import robot_jit
+from ._linalg import unrolled_cholesky
 from .errors import JaxkinError, ShapeError
 from .ik_gradients import full_rank, solution_tangent
 from .jacobians import jacobian_pass
-from .kinematics import forward_pass
+from .kinematics import frame_pose
 from .model import Robot
 from .optimizers import default_optimizer
 from .placements import joint_placements
@@ -181,11 +189,6 @@ def sample_configurations(robot: Robot, key: jax.Array, n: int) -> jax.Array:
     return sampling.sample_configurations(robot, n, key)
 
 
-def _pose(robot: Robot, q: jax.Array, f: int) -> jax.Array:
-    fp = forward_pass(robot, q)
-    return spatial.make_transform(fp.R[f], fp.p[f])
-
-
 def _pose_and_jacobian(robot: Robot, q: jax.Array, f: int):
     g = jacobian_pass(robot, q, f, None, "world_aligned")  # one forward pass for both
     return g.pose(), g.matrix()
@@ -195,21 +198,18 @@ def _damped_step(J: jax.Array, e: jax.Array, lam: jax.Array, free: jax.Array) ->
     """``dq = Jf^T (Jf Jf^T + lam I)^-1 e`` with ``Jf = J * free`` (columns of blocked joints
     zeroed), unrolled into scalar operations.
 
-    A 6x6 Cholesky written entry by entry: under ``vmap`` every scalar is a vector over the batch
-    and XLA fuses the whole solve into one elementwise loop, about ten times faster on CPU than a
-    batched LAPACK call on 6x6 matrices.
+    The 6x6 Cholesky of :func:`jaxkin._linalg.unrolled_cholesky`, then both triangular solves,
+    written entry by entry (fused into one elementwise loop under ``vmap``).
     """
     m, n = J.shape
     Jf = jnp.where(free[None, :], J, 0.0)
     c = [[Jf[i, j] for j in range(n)] for i in range(m)]
-    L: list[list[Any]] = [[None] * m for _ in range(m)]
-    for i in range(m):
-        for k in range(i + 1):
-            a = sum(c[i][j] * c[k][j] for j in range(n))
-            if i == k:
-                a = a + lam
-            s = a - sum((L[i][j] * L[k][j] for j in range(k)), start=jnp.zeros_like(lam))
-            L[i][k] = jnp.sqrt(s) if i == k else s / L[k][k]
+
+    def entry(i: int, k: int) -> Any:
+        a = sum(c[i][j] * c[k][j] for j in range(n))
+        return a + lam if i == k else a
+
+    L, _ = unrolled_cholesky(entry, m)
     y: list[Any] = [None] * m
     for i in range(m):
         y[i] = (e[i] - sum((L[i][j] * y[j] for j in range(i)), start=jnp.zeros_like(lam))) / L[i][i]
@@ -530,7 +530,7 @@ def _optax_one(robot, T_target, seeds, f, tol, max_steps, optimizer, patience, u
     tol2 = tol * tol
 
     def loss(q):
-        e = pose_residual(_pose(robot, q, f), T_target)
+        e = pose_residual(spatial.make_transform(*frame_pose(robot, q, f)), T_target)
         return 0.5 * jnp.sum(e * e)
 
     # Not optax.value_and_grad_from_state with a line search's store_grad=True: optax transposes
@@ -837,8 +837,7 @@ def _check_q0(robot: Robot, q0: Any, batched: bool, N: int, fn: str):
     q0 = jnp.asarray(q0) if hasattr(q0, "shape") else np.asarray(q0, dtype=float)
     if not (batched and tuple(q0.shape) == (N, robot.dof)):
         q0 = check_q(robot, q0, what="q0", fn=fn)
-    if not is_traced(q0) and not np.all(np.isfinite(np.asarray(q0, dtype=np.float64))):
-        raise JaxkinError(f"{fn}: q0 contains NaN or inf.")
+    refuse_nonfinite(q0, "q0", fn)
     return q0
 
 

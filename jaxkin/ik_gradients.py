@@ -61,6 +61,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from ._linalg import unrolled_cholesky
 from .jacobians import jacobian_pass
 from .pose_errors import pose_residual
 
@@ -70,18 +71,8 @@ __all__ = ["damped_pinv_apply", "full_rank", "solution_tangent"]
 def _pivots_positive(A: jax.Array) -> jax.Array:
     """True when the symmetric (m, m) ``A`` is positive definite (every Cholesky pivot > 0),
     unrolled into scalar operations (cheap under ``vmap``)."""
-    m = A.shape[0]
-    L: list[list[Any]] = [[None] * m for _ in range(m)]
-    ok = jnp.ones((), bool)
-    for i in range(m):
-        for k in range(i + 1):
-            s = A[i, k] - sum((L[i][j] * L[k][j] for j in range(k)), start=jnp.zeros_like(A[0, 0]))
-            if i == k:
-                ok = ok & (s > 0)
-                L[i][k] = jnp.sqrt(jnp.maximum(s, jnp.finfo(A.dtype).tiny))
-            else:
-                L[i][k] = s / L[k][k]
-    return ok
+    floor = jnp.finfo(A.dtype).tiny
+    return unrolled_cholesky(lambda i, k: A[i, k], A.shape[0], floor)[1]
 
 
 def full_rank(J: jax.Array, held: jax.Array) -> jax.Array:

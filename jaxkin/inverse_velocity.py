@@ -41,6 +41,7 @@ import numpy as np
 from ._checks import (
     check_J,
     check_J_and_vector,
+    check_path,
     check_q,
     finite_guard,
     is_traced,
@@ -434,9 +435,7 @@ def resolved_rate_control(
     refuse_multi_dof(robot, fn, "integrates q + qd dt in a vector space")
     q0 = check_q(robot, q0, what="q0", fn=fn, batch_hint=hint)
     dtype = result_dtype(robot, q0)
-    Ts = jnp.asarray(T_path, dtype=dtype)
-    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
-        raise ShapeError(f"{fn}: T_path must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
+    Ts = check_path(jnp.asarray(T_path, dtype=dtype), "T_path", fn)
     if not (isinstance(dt, (int, float)) and dt > 0):
         raise JaxkinError(f"{fn}: dt must be a positive number of seconds, got {dt!r}.")
     if damping is None and rcond is None:

@@ -467,16 +467,23 @@ def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
     [1.0, 1.0]
     """
     q = check_q(robot, q, fn="jk.fk", host=True)
-    return eager(frame_transform, robot, (robot.frame_index(frame),), q)
+    return eager(_fk, robot, (robot.frame_index(frame),), q)
 
 
-def frame_transform(robot: Robot, f: int, q: jax.Array) -> jax.Array:
-    """``T_world_frame`` (4, 4) of frame index ``f``; the kernel of :func:`fk` (q checked)."""
-    if scan_joints(robot, f) is not None:
-        R, p = frame_pose(robot, q, f)
+def _fk(robot: Robot, f: int, q: jax.Array) -> jax.Array:
+    """:func:`frame_transform` in :func:`~jaxkin._jit.eager`'s order (static options first)."""
+    return frame_transform(robot, q, f)
+
+
+def frame_transform(robot: Robot, q: jax.Array, frame: int) -> jax.Array:
+    """``T_world_frame`` (4, 4) of one frame (by index): the pose of :func:`frame_pose` as one
+    matrix, the kernel of :func:`fk`; q must be validated. Only the joints on the frame's path
+    are computed."""
+    if scan_joints(robot, frame) is not None:
+        R, p = frame_pose(robot, q, frame)
         return spatial.make_transform(R, p)
-    sp = scalar_pass(robot, q, frames=(f,))
-    return _pose(sp.R[f], sp.p[f], sp.dtype)
+    sp = scalar_pass(robot, q, frames=(frame,))
+    return _pose(sp.R[frame], sp.p[frame], sp.dtype)
 
 
 def _pose(R, p, dtype) -> jax.Array:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
@@ -37,7 +38,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import ModelError, NoDefaultFrameError, ShapeError
+from ._traces import is_traced
+from .errors import JaxkinPrecisionWarning, ModelError, NoDefaultFrameError, ShapeError
 
 __all__ = [
     "COORDINATES",
@@ -47,6 +49,7 @@ __all__ = [
     "NoDefaultFrameError",
     "Params",
     "Robot",
+    "resolve_dtype",
 ]
 
 JOINT_KINDS = ("revolute", "prismatic", "fixed", "free", "ball", "planar")
@@ -70,6 +73,30 @@ COORDINATES = {
 """Names of the ``q`` and ``v`` entries of each multi-coordinate joint kind: the entries of joint
 ``j`` are named ``f"{j}.{coordinate}"`` in ``joint_names`` and ``velocity_names``."""
 PARAMETERISATIONS = ("dh_standard", "dh_modified", "placement")
+
+
+def resolve_dtype(dtype: Any = None) -> np.dtype:
+    """The float dtype to build with: ``dtype`` or JAX's default float.
+
+    Asking for float64 while ``jax_enable_x64`` is off warns (:class:`JaxkinPrecisionWarning`) and
+    returns float32; jaxkin never changes the global JAX configuration.
+    """
+    default = np.dtype(jnp.result_type(float))
+    if dtype is None:
+        return default
+    dt = np.dtype(dtype)
+    if not np.issubdtype(dt, np.floating) or dt.itemsize not in (4, 8):
+        raise ModelError(f"dtype must be float32 or float64, got {dt}.")
+    if dt == np.float64 and not jax.config.read("jax_enable_x64"):
+        warnings.warn(
+            "float64 was requested but jax_enable_x64 is off, so JAX computes in float32. "
+            "Enable it at program start with jax.config.update('jax_enable_x64', True) "
+            "(jaxkin never changes the global JAX configuration).",
+            JaxkinPrecisionWarning,
+            stacklevel=3,
+        )
+        return np.dtype(np.float32)
+    return dt
 
 
 _LEAF = {"leaf": True}  # field metadata: a float-array pytree leaf
@@ -217,7 +244,7 @@ class Robot:
         key = self.__dict__.get("_key")
         if key is None:
             leaves, treedef = jax.tree_util.tree_flatten(self)
-            if any(isinstance(x, jax.core.Tracer) for x in leaves):
+            if is_traced(leaves):
                 return None
             digest = hashlib.blake2b(digest_size=16)
             for x in leaves:
@@ -474,8 +501,6 @@ class Robot:
 
     def astype(self, dtype: Any) -> Robot:
         """A copy with every float leaf cast to ``dtype`` (float32 or float64)."""
-        from .build import resolve_dtype
-
         dt = resolve_dtype(dtype)
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dt), self)
 
@@ -492,6 +517,8 @@ class Robot:
         return dataclasses.replace(self, configurations_=tuple(items.items()))
 
     # ------------------------------------------------------------------ builders
+    # Thin aliases of jaxkin.build, which imports this module: build is imported when they are
+    # called (the one import of build here), so loading model never loads build.
     @classmethod
     def from_dh(cls, rows: Sequence[Mapping[str, Any]], convention: str = "standard", **kwargs):
         """A serial robot from a Denavit-Hartenberg table: see :func:`jaxkin.build.from_dh`."""

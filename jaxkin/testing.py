@@ -47,7 +47,7 @@ import numpy as np
 from . import spatial
 from ._checks import check_q, refuse_multi_dof, result_dtype
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
-from .kinematics import forward_pass
+from .kinematics import forward_pass, frame_pose
 from .model import Robot
 from .sampling import sampling_bounds
 
@@ -391,8 +391,7 @@ def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
     pose at ``q`` (float64 robot and ``q``; traceable)."""
 
     def pose(qq):
-        fp = forward_pass(robot, qq)
-        R, p = fp.R[f], fp.p[f]
+        R, p = frame_pose(robot, qq, f)
         return (p if pt is None else p + R @ pt), R
 
     eye = jnp.eye(robot.nv, dtype=jnp.float64)

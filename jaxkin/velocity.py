@@ -16,18 +16,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import (
+    check_path,
     check_point,
     check_q,
     check_reference,
     check_robot,
     check_twist,
     check_v,
-    finite_guard,
-    is_traced,
+    host_side,
     result_dtype,
 )
 from ._jit import eager
-from .errors import JaxkinError, ShapeError
 from .jacobians import change_reference, jacobian_fwd, jacobian_pass
 from .model import Robot
 from .representations import (
@@ -176,17 +175,6 @@ def velocity_results(
     return results
 
 
-def _host_side(fn: str, **inputs: Any) -> None:
-    """The non-finite policy (:mod:`jaxkin.analysis`) for a host-side result: it cannot be
-    poisoned, so a traced input raises too."""
-    if is_traced(*inputs.values()):
-        raise JaxkinError(
-            f"{fn} returns a Python string, so it works on concrete values only: call it outside "
-            "jit/vmap/grad (e.g. on jax.device_get of the traced result)."
-        )
-    finite_guard(fn, **inputs)
-
-
 def classify_twist(V: Any, tol: float = 1e-9) -> str:
     """Classify an instantaneous rigid-body motion given by its twist ``[v; omega]`` at a point.
 
@@ -212,7 +200,7 @@ def classify_twist(V: Any, tol: float = 1e-9) -> str:
     """
     fn = "jk.classify_twist"
     V = check_twist(V, fn)
-    _host_side(fn, V=V, tol=tol)
+    host_side(fn, V=V, tol=tol)
     V = np.asarray(V, dtype=float)
     v, w = V[:3], V[3:]
     nw, nv = np.linalg.norm(w), np.linalg.norm(v)
@@ -241,10 +229,8 @@ def classify_motion(Ts: Any, tol: float = 1e-9) -> str:
     ``tol``.
     """
     fn = "jk.classify_motion"
-    _host_side(fn, Ts=Ts, tol=tol)
-    Ts = np.asarray(Ts, dtype=float)
-    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
-        raise ShapeError(f"{fn}: Ts must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
+    host_side(fn, Ts=Ts, tol=tol)
+    Ts = check_path(np.asarray(Ts, dtype=float), "Ts", fn)
     R, p = Ts[:, :3, :3], Ts[:, :3, 3]
     scale = 1.0 + float(np.max(np.abs(p)))
     same_R = np.max(np.abs(R - R[0])) <= tol

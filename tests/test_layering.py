@@ -1,0 +1,137 @@
+"""Each concept in one place (issue 22, items 4 and 5): the checks in ``_checks`` (the notion of
+"traced" in ``_traces``, below the model), one unrolled Cholesky, one frame-pose kernel, one
+argument order for the kernels, and a model that does not need ``build`` to load. Source scans
+and small numeric checks: no robot is compiled here."""
+
+import ast
+import inspect
+import re
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxkin as jk
+from jaxkin import _linalg, jacobians, kinematics, model
+
+SRC = Path(jk.__file__).parent
+
+
+def _files_containing(pattern: str) -> list[str]:
+    rx = re.compile(pattern)
+    return sorted(p.name for p in SRC.glob("*.py") if rx.search(p.read_text()))
+
+
+# --- item 4: checks outside _checks ----------------------------------------------------------
+def test_is_traced_is_written_once():
+    assert _files_containing(r"core\.Tracer") == ["_traces.py"]
+
+
+def test_non_finite_and_path_refusals_are_written_in_checks_only():
+    assert _files_containing(r"contains NaN or inf") == ["_checks.py"]
+    assert _files_containing(r"\(N, 4, 4\) with N >= 2") == ["_checks.py"]
+
+
+def test_path_check_names_the_argument_of_each_caller():
+    with pytest.raises(jk.ShapeError, match=r"jk.classify_motion: Ts must have shape \(N, 4, 4\)"):
+        jk.classify_motion(np.eye(4)[None])
+    robot = jk.robots.load("two_link_planar")
+    with pytest.raises(jk.ShapeError, match=r"resolved_rate_control: T_path must have shape"):
+        jk.resolved_rate_control(robot, jnp.zeros(2), jnp.eye(4)[None], 0.01)
+
+
+def test_ik_refuses_a_non_finite_q0_by_name():
+    robot = jk.robots.load("two_link_planar")
+    T = jk.fk(robot, jnp.array([0.3, 0.4]))
+    with pytest.raises(jk.JaxkinError, match=r"jk.solve_ik: q0 contains NaN or inf\."):
+        jk.solve_ik(robot, T, q0=jnp.array([jnp.nan, 0.0]))
+
+
+# --- item 5a: one unrolled Cholesky -----------------------------------------------------------
+def test_unrolled_cholesky_is_written_once():
+    assert _files_containing(r"L\[i\]\[k\] =") == ["_linalg.py"]
+
+
+def test_unrolled_cholesky_matches_lapack_and_flags_indefinite_matrices():
+    rng = np.random.default_rng(0)
+    B = rng.normal(size=(5, 5))
+    A = B @ B.T + 0.1 * np.eye(5)
+    L, ok = _linalg.unrolled_cholesky(lambda i, k: jnp.asarray(A[i, k]), 5)
+    got = np.array([[0.0 if x is None else float(x) for x in row] for row in L])
+    np.testing.assert_allclose(got, np.linalg.cholesky(A), rtol=1e-5, atol=1e-6)
+    assert bool(ok)
+    C = A - 10.0 * np.eye(5)  # indefinite: some pivot <= 0; the floor keeps L finite
+    L, ok = _linalg.unrolled_cholesky(lambda i, k: jnp.asarray(C[i, k]), 5, floor=1e-30)
+    assert not bool(ok)
+    assert all(np.isfinite(float(x)) for row in L for x in row if x is not None)
+
+
+# --- item 5b: one kernel for the pose of a frame -----------------------------------------------
+def test_ik_and_analysis_take_a_frame_pose_from_its_kernel():
+    """No ``fp.R[f]`` / ``fp.p[f]`` picked out of a full forward pass (calibration's residuals
+    keep theirs: its compiled fit is bit-identical only with the full pass)."""
+    pick = r"fp\.[Rp]\[(f|robot\.frame_index)"
+    assert _files_containing(pick) == ["calibration.py"]
+    assert "forward_pass" not in (SRC / "ik.py").read_text()
+    src = (SRC / "calibration.py").read_text()
+    assert src.count("frame_pose(") == 1 and src.count("forward_pass(") == 1
+
+
+# --- item 5c: one argument order ----------------------------------------------------------------
+@pytest.mark.parametrize(
+    "kernel",
+    [
+        kinematics.frame_transform,
+        kinematics.frame_pose,
+        jacobians.jacobian_pass,
+        kinematics.forward_pass,
+        kinematics.scalar_pass,
+        kinematics.scan_pass,
+    ],
+)
+def test_kernels_take_robot_q_then_the_frame(kernel):
+    names = list(inspect.signature(kernel).parameters)
+    assert names[:2] == ["robot", "q"], names
+    assert not any(n in ("f", "frame") for n in names[3:]), names
+
+
+def test_frame_transform_is_the_pose_of_frame_pose():
+    robot = jk.robots.load("two_link_planar")
+    q = jnp.array([0.3, -0.5])
+    f = robot.n_frames - 1
+    R, p = kinematics.frame_pose(robot, q, f)
+    T = kinematics.frame_transform(robot, q, f)
+    np.testing.assert_array_equal(T[:3, :3], R)
+    np.testing.assert_array_equal(T[:3, 3], p)
+    T_fk = jax.jit(lambda q: jk.fk(robot, q))(q)  # fk's kernel, traced inline
+    np.testing.assert_array_equal(
+        jax.jit(lambda q: kinematics.frame_transform(robot, q, f))(q), T_fk
+    )
+
+
+# --- item 5d: model does not need build ---------------------------------------------------------
+def test_model_imports_build_only_inside_its_two_builder_aliases():
+    tree = ast.parse((SRC / "model.py").read_text())
+    importers = {
+        fn.name
+        for fn in ast.walk(tree)
+        if isinstance(fn, ast.FunctionDef)
+        for node in ast.walk(fn)
+        if isinstance(node, ast.ImportFrom) and node.module == "build"
+    }
+    assert importers == {"from_dh", "from_joints"}
+    top = [n for n in tree.body if isinstance(n, ast.ImportFrom) and n.module == "build"]
+    assert top == []
+
+
+def test_astype_resolves_its_dtype_in_model():
+    robot = jk.robots.load("two_link_planar")
+    assert robot.astype(np.float32).base.dtype == np.float32
+    assert model.resolve_dtype(None) == np.dtype(jnp.result_type(float))
+    with pytest.raises(jk.ModelError, match="float32 or float64"):
+        robot.astype(np.int32)
+    assert jax.tree_util.tree_structure(robot.astype(np.float32)) == jax.tree_util.tree_structure(
+        robot
+    )
