@@ -718,8 +718,8 @@ def test_symlink_loop_is_named_as_such(tmp_path):
         load_urdf(a)
     assert "no such file" not in str(info.value) and info.value.file == str(a)
     dangling = tmp_path / "dangling.urdf"
-    os.symlink(tmp_path / "gone.urdf", dangling)
-    with pytest.raises(URDFError, match=r"symbolic link to '.*gone\.urdf', which does not exist"):
+    os.symlink("gone.urdf", dangling)  # relative: long absolute targets are shortened in messages
+    with pytest.raises(URDFError, match=r"symbolic link to 'gone\.urdf', which does not exist"):
         load_urdf(dangling)
 
 
