@@ -165,7 +165,14 @@ def _size() -> str:
 def _xml_text(source: Any) -> str | None:
     """``source`` as XML text when it is the XML itself (``str`` starting with ``<``, bytes)."""
     if isinstance(source, (bytes, bytearray)):
-        source = bytes(source).decode("utf-8")
+        try:
+            source = bytes(source).decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise MJCFError(
+                f"<bytes>: the MJCF is not UTF-8 text ({e.reason} at byte {e.start}); pass the "
+                "file's path, or its text decoded.",
+                file="<bytes>",
+            ) from None
     if isinstance(source, str) and source.lstrip("\ufeff \t\r\n").startswith("<"):
         return source
     return None

@@ -158,3 +158,8 @@ def test_max_bodies_keyword_counts_includes_replicate_and_attach(tmp_path):
     for bad in (0, -3, 2.5, "10", True, None):
         with pytest.raises(jk.JaxkinError, match="max_bodies must be a positive int"):
             jk.load_mjcf(main, max_bodies=bad)
+
+
+def test_bytes_that_are_not_utf8_are_a_jaxkin_error():
+    with pytest.raises(MJCFError, match="not UTF-8"):
+        jk.load_mjcf(b"<mujoco model='\xff'><worldbody/></mujoco>")
