@@ -40,6 +40,7 @@ import numpy as np
 
 import jaxkin as jk
 from jaxkin.batch import chunked_map, stream_map
+from jaxkin.io import npy_header
 
 from .jacobian_report import scale_summary
 from .peers import jaxkin_robot, robot_sources
@@ -102,13 +103,7 @@ def _write_npy(path: Path, robot, n: int, seed: int, block: int, dtype, rates: b
 def _npz_rows(path: Path, member: str, rows: list[int]) -> tuple[tuple[int, ...], np.ndarray]:
     """Selected rows of an array inside an uncompressed npz, read by seeking (never loading)."""
     with zipfile.ZipFile(path) as z, z.open(member) as f:
-        version = np.lib.format.read_magic(f)
-        read = (
-            np.lib.format.read_array_header_1_0
-            if version == (1, 0)
-            else np.lib.format.read_array_header_2_0
-        )
-        shape, fortran, dtype = read(f)
+        shape, fortran, dtype = npy_header(f)
         assert not fortran
         base = f.tell()
         row_bytes = int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize

@@ -44,6 +44,7 @@ __all__ = [
     "ResultWriter",
     "csv_record",
     "csv_records",
+    "npy_header",
     "read_configurations",
 ]
 
@@ -838,6 +839,16 @@ def _read_npz(source: Any, p: Any, robot: Robot):
     return out[0], out[1]
 
 
+def npy_header(fp: Any) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """``(shape, fortran_order, dtype)`` that the ``.npy`` stream ``fp`` declares, read from its
+    header alone (nothing is allocated: check sizes before numpy reads the data). Leaves ``fp``
+    at the first data byte."""
+    version = np.lib.format.read_magic(fp)
+    if version == (1, 0):
+        return np.lib.format.read_array_header_1_0(fp)
+    return np.lib.format.read_array_header_2_0(fp)
+
+
 def _npz_member(f: Any, key: str, p: Any) -> np.ndarray:
     """The array ``key`` of the open .npz ``f``, read only when its declared sizes fit: the
     zip's uncompressed size of the member and its .npy header's shape x itemsize, each at most
@@ -845,13 +856,7 @@ def _npz_member(f: Any, key: str, p: Any) -> np.ndarray:
     member = f"{key}.npy" if f"{key}.npy" in f.zip.namelist() else key
     declared = f.zip.getinfo(member).file_size
     with f.zip.open(member) as fp:
-        version = np.lib.format.read_magic(fp)
-        header = (
-            np.lib.format.read_array_header_1_0
-            if version == (1, 0)
-            else np.lib.format.read_array_header_2_0
-        )
-        shape, _, dtype = header(fp)
+        shape, _, dtype = npy_header(fp)
     nbytes = math.prod(shape) * dtype.itemsize
     if max(declared, nbytes) > MAX_INPUT_BYTES:
         raise JaxkinError(
