@@ -18,6 +18,7 @@ from . import inverse_velocity as inverse_velocity
 from . import robots as robots
 from . import sampling as sampling
 from . import spatial as spatial
+from . import tasks as tasks
 from .analysis import condition_number as condition_number
 from .analysis import dependent_columns as dependent_columns
 from .analysis import force_ellipsoid as force_ellipsoid
@@ -31,6 +32,8 @@ from .analysis import wrist_centre as wrist_centre
 from .analysis import wrist_decoupling as wrist_decoupling
 from .calibration import calibrate as calibrate
 from .calibration import identifiability as identifiability
+from .com import center_of_mass as center_of_mass
+from .com import com_jacobian as com_jacobian
 from .configuration import difference as difference
 from .configuration import integrate as integrate
 from .configuration import neutral as neutral
@@ -71,6 +74,13 @@ from .representations import rate_matrix as rate_matrix
 from .representations import representation_margin as representation_margin
 from .sampling import sample_configurations as sample_configurations
 from .sampling import sampling_bounds as sampling_bounds
+from .tasks import ComTask as ComTask
+from .tasks import FollowResult as FollowResult
+from .tasks import FrameTask as FrameTask
+from .tasks import PostureTask as PostureTask
+from .tasks import TaskSolution as TaskSolution
+from .tasks import follow_paths as follow_paths
+from .tasks import solve_tasks as solve_tasks
 from .urdf import load_urdf as load_urdf
 from .urdf_export import to_urdf as to_urdf
 from .velocity import classify_motion as classify_motion
@@ -81,15 +91,20 @@ from .velocity import twist as twist
 # What `from jaxkin import *` binds: the names above, never a submodule such as jaxkin.io
 # (which would shadow the standard library's io).
 __all__ = [
+    "ComTask",
+    "FollowResult",
+    "FrameTask",
     "IKError",
     "IKSolution",
     "JaxkinError",
     "JaxkinPrecisionWarning",
     "ModelError",
     "NoDefaultFrameError",
+    "PostureTask",
     "RepresentationSingularityError",
     "Robot",
     "ShapeError",
+    "TaskSolution",
     "UnknownRobotError",
     "adaptive_damping",
     "analysis",
@@ -99,9 +114,11 @@ __all__ = [
     "analytical_jacobian_dot_qd",
     "calibrate",
     "calibration",
+    "center_of_mass",
     "change_reference",
     "classify_motion",
     "classify_twist",
+    "com_jacobian",
     "compilation",
     "condition_number",
     "configuration",
@@ -111,6 +128,7 @@ __all__ = [
     "difference",
     "fk",
     "fk_all",
+    "follow_paths",
     "force_ellipsoid",
     "geometric_jacobian",
     "identifiability",
@@ -144,7 +162,9 @@ __all__ = [
     "sampling_bounds",
     "singular_values",
     "solve_ik",
+    "solve_tasks",
     "spatial",
+    "tasks",
     "to_urdf",
     "twist",
     "velocity_ellipsoid",

@@ -348,6 +348,42 @@ def check_point(point: Any, dtype: Any, fn: str = "this function") -> jax.Array 
     return jnp.asarray(point, dtype=dtype)
 
 
+def check_frames(robot: Robot, frame: Any, fn: str) -> tuple[int, ...] | None:
+    """Several frames, asked for as a list or tuple of names and indices (mixed, in any order,
+    duplicates allowed) or a 1-D numpy array of indices, as a tuple of frame indices in that
+    order; None when ``frame`` is one frame (a name, an index or None, for
+    ``robot.frame_index``). An empty list raises; an unknown name or an index out of range
+    raises as it does for one frame."""
+    if isinstance(frame, np.ndarray) and frame.ndim == 1:
+        frame = frame.tolist()
+    if not isinstance(frame, (list, tuple)):
+        return None
+    if len(frame) == 0:
+        raise JaxkinError(
+            f"{fn}: frame must be a frame name or index, or a non-empty list of them, got an "
+            f"empty {type(frame).__name__}. Pass frame=None for the default frame, or e.g. "
+            f"frame={list(robot.frame_names[-2:])!r}."
+        )
+    return tuple(robot.frame_index(f) for f in frame)
+
+
+def check_points(point: Any, k: int, dtype: Any, fn: str = "this function") -> jax.Array | None:
+    """Offsets for k frames, each in its frame's own axes: None, one offset (3,) for every frame,
+    or one per frame (k, 3); returned as None or (k, 3)."""
+    if point is None:
+        return None
+    x = _as_array(point, "point", fn, "offsets in the frames' own axes")
+    _numeric(x, "point", fn)
+    if tuple(x.shape) == (3,):
+        return jnp.broadcast_to(jnp.asarray(x, dtype=dtype), (k, 3))
+    if tuple(x.shape) != (k, 3):
+        raise ShapeError(
+            f"{fn}: point must have shape (3,) (one offset for every frame) or ({k}, 3) (one per "
+            f"frame, in the frames' own axes) for {k} frames, got {tuple(x.shape)}."
+        )
+    return jnp.asarray(x, dtype=dtype)
+
+
 def check_reference(reference: Any) -> str:
     if reference not in REFERENCES:
         raise JaxkinError(

@@ -2,7 +2,7 @@
 
 A robot whose leaves are concrete (the usual case: ``solve_ik(robot, ...)`` called from Python)
 is passed to ``jax.jit`` as a *static* argument (a ``Robot`` is an immutable value that hashes by
-value), so the forward pass folds its constants (see :func:`jaxkin.kinematics.scalar_pass`): a
+value), so the forward pass folds its constants (see :func:`jaxkin._forward.scalar_pass`): a
 faster kernel that also compiles several times faster than one over traced parameters. One
 compile per robot value and option set; a changed robot (e.g. a calibrated one) compiles once
 more, and an equal robot loaded again reuses the compiled solver.
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import collections
 import functools
+import inspect
 from collections.abc import Callable
 from typing import Any
 
@@ -84,35 +85,69 @@ without bound."""
 _eager_cache: collections.OrderedDict = collections.OrderedDict()
 
 
-def eager(kernel: Callable, robot: Any, static: tuple, *arrays: Any) -> Any:
-    """``kernel(robot, *static, *arrays)``, compiled and cached when called outside any trace.
+def eager(kernel: Callable, static_argnames: tuple[str, ...] = ()) -> Callable:
+    """``kernel(robot, *args)`` as a building block: compiled and cached when called outside any
+    trace, traced inline inside one. Used as ``_fk = eager(frame_transform, ("frame",))``, then
+    ``_fk(robot, q, f)``, with every argument given by position.
+
+    ``static_argnames`` name the kernel's options (frame indices, ``reference``, ...): hashable
+    values the executable is specialised on, wherever the kernel takes them, so every kernel
+    keeps the one argument order ``(robot, q, frame, ...)``; the other arguments are arrays (or
+    None). As ``jax.jit``'s own ``static_argnames``, but with the robot closed over and the cache
+    bounded.
 
     Inside a user's ``jit``/``vmap``/``grad`` (a traced robot or array, or an active trace) the
     kernel is traced inline, as part of the caller's computation. Called eagerly, the kernel is
     compiled by ``jax.jit`` with the robot closed over (its constants folded: see
-    :func:`jaxkin.kinematics.scalar_pass`) and cached under ``(kernel, robot, static)``; the
+    :func:`jaxkin._forward.scalar_pass`) and cached under ``(kernel, robot, static values)``; the
     robot is an immutable value, so an equal robot shares the executable and a changed one
     (``robot.replace(...)``) gets its own. ``jax.jit`` compiles once per array shape and dtype.
-    ``arrays`` may be host numpy arrays (handed to the executable as they are: cheaper than a
+    The arrays may be host numpy arrays (handed to the executable as they are: cheaper than a
     JAX array made first).
     At most :data:`EAGER_CACHE_SIZE` keys are kept. Inside ``jax.disable_jit()`` the kernel runs
     op by op and nothing is cached (cheaper for a robot used once, e.g. a property test over
     random robots).
     """
-    if inside_trace() or not robot.is_concrete or is_traced(arrays) or _jit_disabled():
-        return kernel(robot, *static, *_device(arrays))
-    key = (kernel, robot, static)
-    try:
-        compiled = _eager_cache.pop(key, None)
-    except TypeError:  # an unhashable static option: no cache
-        return kernel(robot, *static, *_device(arrays))
-    if compiled is None:
-        options = compiler_options() or None
-        compiled = jax.jit(functools.partial(kernel, robot, *static), compiler_options=options)
-    _eager_cache[key] = compiled  # most recently used last
-    while len(_eager_cache) > EAGER_CACHE_SIZE:
-        _eager_cache.popitem(last=False)
-    return compiled(*arrays)
+    names = list(inspect.signature(kernel).parameters)[1:]  # after the robot
+    static_pos = tuple(names.index(n) for n in static_argnames)
+    array_pos = tuple(i for i in range(len(names)) if i not in static_pos)
+
+    @functools.wraps(kernel)
+    def call(robot: Any, *args: Any) -> Any:
+        if len(args) != len(names):
+            raise TypeError(f"{kernel.__name__} takes {len(names)} arguments after the robot.")
+        arrays = tuple(args[i] for i in array_pos)
+        if inside_trace() or not robot.is_concrete or is_traced(arrays) or _jit_disabled():
+            return kernel(robot, *_device(args))
+        static = tuple(args[i] for i in static_pos)
+        key = (kernel, robot, static)
+        try:
+            compiled = _eager_cache.pop(key, None)
+        except TypeError:  # an unhashable static option: no cache
+            return kernel(robot, *_device(args))
+        if compiled is None:
+            options = compiler_options() or None
+            bound = _bind(kernel, robot, dict(zip(static_pos, static, strict=True)), len(names))
+            compiled = jax.jit(bound, compiler_options=options)
+        _eager_cache[key] = compiled  # most recently used last
+        while len(_eager_cache) > EAGER_CACHE_SIZE:
+            _eager_cache.popitem(last=False)
+        return compiled(*arrays)
+
+    call.kernel = kernel  # type: ignore[attr-defined]
+    call.static_argnames = tuple(static_argnames)  # type: ignore[attr-defined]
+    return call
+
+
+def _bind(kernel: Callable, robot: Any, static: dict, n: int) -> Callable:
+    """``kernel`` with the robot and the static options (by position) fixed: a function of the
+    arrays alone, in order."""
+
+    def run(*arrays: Any) -> Any:
+        rest = iter(arrays)
+        return kernel(robot, *(static[i] if i in static else next(rest) for i in range(n)))
+
+    return run
 
 
 def _device(arrays: tuple) -> tuple:

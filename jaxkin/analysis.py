@@ -63,9 +63,9 @@ from ._checks import (
     refuse_multi_dof,
     result_dtype,
 )
+from ._forward import forward_pass
+from ._jacobian_pass import jacobian_pass
 from .errors import JaxkinError, ShapeError
-from .jacobians import jacobian_pass
-from .kinematics import forward_pass
 from .model import Robot
 from .spatial import safe_sqrt
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import ModelError
 from .model import COORDINATES, JOINT_KINDS, JOINT_SIZES, Robot, resolve_dtype
-from .spatial import matrix_to_rpy_np, quaternion_to_matrix_np
+from .spatial import matrix_to_rpy_np, quaternion_to_matrix_np, rotation_about_axis_np
 
 __all__ = [
     "TOOL_FLANGE",
@@ -149,6 +149,7 @@ def from_joints(
     dtype: Any = None,
     leaders: Sequence[Mapping[str, Any]] = (),
     default_frames: Sequence[str] = (),
+    root_inertial: Mapping[str, Any] | None = None,
 ) -> Robot:
     """A robot from URDF-style joint placements (chain or tree).
 
@@ -202,6 +203,18 @@ def from_joints(
     robot branches: asking for the default raises, listing these candidates).
     :func:`select` gives it (and ``leaders``) for a part of a larger description.
 
+    Masses (for :func:`jaxkin.center_of_mass`): a joint's ``inertial`` is the mass of the frame
+    it moves (its child), ``root_inertial`` that of the root frame; a mapping with ``mass`` (kg,
+    finite, >= 0), optional ``xyz`` (the centre of mass in the frame; default zeros), ``rpy`` or
+    ``quat`` (the orientation of the inertia's axes in the frame; default identity) and
+    ``inertia`` (about the centre of mass in those axes: URDF's six numbers ``(ixx, ixy, ixz,
+    iyy, iyz, izz)`` or a symmetric 3x3 matrix; default zeros), as URDF's ``<inertial>``. Stored
+    per frame in the frame's own axes (``robot.frame_mass``, ``frame_com``, ``frame_inertia``);
+    a frame without one has mass 0. The robot's ``has_inertia`` is True when any is given.
+    Moments must be finite and the matrix symmetric; positive semi-definiteness and the
+    triangle inequality are not enforced (files in use miss them by rounding, e.g. moments of
+    -5e-20, as urdfdom and Pinocchio accept; the centre of mass does not depend on the inertia).
+
     >>> import jaxkin as jk
     >>> robot = jk.Robot.from_joints(
     ...     [
@@ -222,6 +235,7 @@ def from_joints(
     frame_names = [str(root)]
     frame_of = {str(root): 0}  # name -> frame index (O(1) lookups for long chains)
     specs = [_joint_spec(spec, j, frame_names, frame_of) for j, spec in enumerate(joints)]
+    root_mass = None if root_inertial is None else _inertial(root_inertial, "root_inertial")
     all_names = [s.name for s in specs]
     _check_unique(all_names, "joint name")
     kinds = [s.kind for s in specs]
@@ -253,6 +267,7 @@ def from_joints(
         tool=tool,
         dtype=dt,
         default_frames=default_frames,
+        inertials=[root_mass, *(s.inertial for s in specs)],
     )
 
 
@@ -269,6 +284,7 @@ _JOINT_KEYS = {
     "lower",
     "upper",
     "mimic",
+    "inertial",
 }
 
 
@@ -283,6 +299,7 @@ class _Joint(NamedTuple):
     axis: np.ndarray
     limits: tuple[float, float] | None  # None for fixed, free, ball and planar joints
     mimic: tuple[str, float, float] | None
+    inertial: tuple[float, np.ndarray, np.ndarray] | None  # the child's (mass, com, inertia)
 
 
 def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
@@ -361,7 +378,68 @@ def _joint_spec(spec: Any, j: int, frame_names: list, frame_of: dict) -> _Joint:
         ),
         limits=limits,
         mimic=mimic,
+        inertial=None if spec.get("inertial") is None else _inertial(spec["inertial"], where),
     )
+
+
+_INERTIAL_KEYS = {"mass", "xyz", "rpy", "quat", "inertia"}
+
+
+def _inertial(value: Any, where: str) -> tuple[float, np.ndarray, np.ndarray]:
+    """Validate an ``inertial`` mapping of :func:`from_joints`: ``(mass, com (3,), inertia (3,
+    3))``, the inertia about the centre of mass in the frame's axes (exactly symmetric)."""
+    where = f"{where}, key 'inertial'" if where != "root_inertial" else where
+    _check_keys(
+        value,
+        where,
+        _INERTIAL_KEYS,
+        ("mass",),
+        "an inertial needs mass (kg); optional xyz, rpy or quat, inertia",
+    )
+    mass = _finite_float(value["mass"], f"{where}, 'mass'")
+    if mass < 0.0:
+        raise ModelError(f"{where}: mass must be >= 0 kg, got {mass!r}.")
+    if "rpy" in value and "quat" in value:
+        raise ModelError(f"{where} gives both rpy and quat; give one orientation.")
+    com = _vector3(value.get("xyz", (0.0, 0.0, 0.0)), f"{where}, 'xyz'")
+    if "quat" in value:
+        R = _quat_matrix(value["quat"], f"{where}, 'quat'")
+    else:
+        roll, pitch, yaw = _vector3(value.get("rpy", (0.0, 0.0, 0.0)), f"{where}, 'rpy'")
+        R = (
+            rotation_about_axis_np((0.0, 0.0, 1.0), yaw)
+            @ rotation_about_axis_np((0.0, 1.0, 0.0), pitch)
+            @ rotation_about_axis_np((1.0, 0.0, 0.0), roll)
+        )
+    inertia = _inertia_matrix(value.get("inertia", np.zeros((3, 3))), f"{where}, 'inertia'")
+    inertia = R @ inertia @ R.T
+    return mass, com, (inertia + inertia.T) / 2.0
+
+
+def _inertia_matrix(value: Any, where: str) -> np.ndarray:
+    """A rotational inertia from URDF's six numbers ``(ixx, ixy, ixz, iyy, iyz, izz)`` or a
+    symmetric 3x3 matrix: finite and symmetric (to rounding)."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is not None and arr.shape == (6,):
+        xx, xy, xz, yy, yz, zz = arr
+        arr = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    if arr is None or arr.shape != (3, 3):
+        raise ModelError(
+            f"{where} must be six numbers (ixx, ixy, ixz, iyy, iyz, izz) or a symmetric 3x3 "
+            f"matrix, got {value!r:.80}."
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ModelError(f"{where} must be finite, got {arr.tolist()}.")
+    scale = float(np.max(np.abs(arr)))
+    if np.max(np.abs(arr - arr.T)) > 1e-9 * scale:
+        raise ModelError(
+            f"{where} must be symmetric (a rotational inertia is), got {arr.tolist()}; give "
+            "the six numbers (ixx, ixy, ixz, iyy, iyz, izz)."
+        )
+    return arr
 
 
 def _placement(spec: Mapping[str, Any], where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -484,6 +562,7 @@ def _build(
     upper,
     axis,
     default_frames=(),
+    inertials=None,
     **static,
 ) -> Robot:
     has_tool = tool is not None
@@ -503,6 +582,9 @@ def _build(
         base=jnp.asarray(base_T, dtype=dtype),
         tool=jnp.asarray(tool_T, dtype=dtype),
     )
+    has_inertia = inertials is not None and any(x is not None for x in inertials)
+    if has_inertia:
+        leaves.update(_inertial_leaves([*inertials, *([None] if has_tool else [])], dtype))
     return Robot(
         params=static.pop("params"),
         **leaves,
@@ -516,6 +598,19 @@ def _build(
         frame_names=tuple(frame_names),
         has_tool=has_tool,
         default_frames=default_frames,
+        has_inertia=has_inertia,
+    )
+
+
+def _inertial_leaves(inertials: list, dtype) -> dict[str, Any]:
+    """``frame_mass``, ``frame_com``, ``frame_inertia`` from per-frame ``(mass, com, inertia)``
+    (None: a massless frame)."""
+    none = (0.0, np.zeros(3), np.zeros((3, 3)))
+    mass, com, inertia = zip(*(none if x is None else x for x in inertials), strict=True)
+    return dict(
+        frame_mass=jnp.asarray(np.array(mass, dtype=float), dtype=dtype),
+        frame_com=jnp.asarray(np.array(com, dtype=float).reshape(-1, 3), dtype=dtype),
+        frame_inertia=jnp.asarray(np.array(inertia, dtype=float).reshape(-1, 3, 3), dtype=dtype),
     )
 
 
@@ -711,14 +806,15 @@ class SelectionError(ModelError):
 
 class Selection(NamedTuple):
     """What :func:`select` keeps: the arguments of :func:`from_joints` (``joints``, ``root``,
-    ``leaders``, ``default_frames``) and ``index``, the positions of the kept joints in the
-    description (parents first; the joint ``above`` is not one of them)."""
+    ``leaders``, ``default_frames``, ``root_inertial``) and ``index``, the positions of the kept
+    joints in the description (parents first; the joint ``above`` is not one of them)."""
 
     root: str
     joints: list[dict[str, Any]]
     leaders: list[dict[str, Any]]
     default_frames: tuple[str, ...]
     index: tuple[int, ...]
+    root_inertial: Mapping[str, Any] | None = None
 
 
 def select(
@@ -729,6 +825,7 @@ def select(
     *,
     mimics: Callable[[set[str]], Mapping[str, Mapping[str, Any]]] | None = None,
     above: Mapping[str, Any] | None = None,
+    root_inertial: Mapping[str, Any] | None = None,
 ) -> Selection:
     """The part of a description that a loader builds: the one selection of every file loader
     (``jk.load_urdf``, xacro included, and ``jk.load_mjcf``), for :func:`from_joints`.
@@ -745,6 +842,11 @@ def select(
     of them (followed to the end of its chain). Those become ``leaders`` (sorted by name), and
     the kept specs (copies) get their ``mimic`` from it. ``default_frames`` is
     :func:`end_frames` of the result.
+
+    Masses: each spec's ``inertial`` (that of its child frame) is kept with it;
+    ``root_inertial`` is the mass of ``root``. The kept part's root frame keeps its own (the
+    ``inertial`` of the joint above it, which is not kept, or ``root_inertial``): it becomes the
+    ``inertial`` of ``above`` when given, else the result's ``root_inertial``.
 
     Raises :class:`SelectionError` naming the ``base`` or ``tip`` that is not a frame, or a tip
     that is not below the base; the loaders add their file's context.
@@ -772,15 +874,22 @@ def select(
     start = root if base is None else base
     index = _subtree(joints, start) if tip is None else _chain(joints, start, tip)
     kept = [dict(joints[i]) for i in index]
+    if start == root:
+        mass = root_inertial
+    else:
+        mass = next(s.get("inertial") for s in joints if s["child"] == start)
     if above is not None:
-        kept.insert(0, {**above, "child": start})
-        start = above["parent"]
+        top = {**above, "child": start}
+        if mass is not None:
+            top["inertial"] = mass
+        kept.insert(0, top)
+        start, mass = above["parent"], None
     mimic, leaders = _leaders(joints, kept, mimics)
     for s in kept:
         if s["name"] in mimic:
             s["mimic"] = mimic[s["name"]]
     ends = end_frames(start, [(s["parent"], s["child"], s["type"] != "fixed") for s in kept])
-    return Selection(start, kept, leaders, ends, tuple(index))
+    return Selection(start, kept, leaders, ends, tuple(index), mass)
 
 
 def _subtree(joints: Sequence[Mapping[str, Any]], start: str) -> list[int]:

@@ -39,9 +39,9 @@ import numpy as np
 
 from . import spatial
 from ._checks import check_poses, finite_guard, is_traced, refuse_multi_dof
+from ._forward import forward_pass, frame_pose
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .kinematics import forward_pass, frame_pose
 from .model import Robot
 from .optimizers import default_optimizer
 from .pose_errors import pose_residual

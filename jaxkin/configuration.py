@@ -190,6 +190,11 @@ def _normalize(robot: Robot, q):
     return jnp.concatenate(parts)
 
 
+_integrate_eager = eager(_integrate)
+_difference_eager = eager(_difference)
+_normalize_eager = eager(_normalize)
+
+
 def integrate_kernel(robot: Robot, q: jax.Array, v: jax.Array, dt: Any = 1.0) -> jax.Array:
     """:func:`integrate` on checked arrays (for kernels that differentiate through it)."""
     return _integrate(robot, q, v, dt)
@@ -228,7 +233,7 @@ def integrate(robot: Robot, q: Any, v: Any, dt: Any = 1.0) -> jax.Array:
         "the time to move for",
         " For several times use jax.vmap(lambda dt: jk.integrate(robot, q, v, dt))(dts).",
     )
-    return eager(_integrate, robot, (), q, v, jnp.asarray(dt, result_dtype(robot, q, v)))
+    return _integrate_eager(robot, q, v, jnp.asarray(dt, result_dtype(robot, q, v)))
 
 
 def difference(robot: Robot, q0: Any, q1: Any) -> jax.Array:
@@ -250,7 +255,7 @@ def difference(robot: Robot, q0: Any, q1: Any) -> jax.Array:
     hint = "jax.vmap(lambda q0, q1: jk.difference(robot, q0, q1))(q0s, q1s)"
     q0 = check_q(robot, q0, what="q0", fn=fn, batch_hint=hint)
     q1 = check_q(robot, q1, what="q1", fn=fn, batch_hint=hint)
-    return eager(_difference, robot, (), q0, q1)
+    return _difference_eager(robot, q0, q1)
 
 
 def neutral(robot: Robot, dtype: Any = None) -> jax.Array:
@@ -288,4 +293,4 @@ def normalize(robot: Robot, q: Any) -> jax.Array:
     [1.0, 0.0, 0.0, 0.0]
     """
     q = check_q(robot, q, fn="jk.normalize")
-    return eager(_normalize, robot, (), q)
+    return _normalize_eager(robot, q)

@@ -41,9 +41,9 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_point, check_q, check_reference, check_v, result_dtype
+from ._jacobian_pass import analytical_jacobian_pass, jacobian_pass
 from ._jit import eager
 from .configuration import integrate_kernel
-from .jacobians import analytical_jacobian_pass, jacobian_pass
 from .model import Robot
 from .representations import check_representation, guard_singular
 
@@ -105,7 +105,7 @@ def jacobian_dot(
     True
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot")
-    return eager(_jacobian_dot, robot, (f, reference), q, qd, pt)
+    return _jacobian_dot(robot, q, f, qd, pt, reference)
 
 
 def _tangent(robot, q, fun):
@@ -117,9 +117,9 @@ def _tangent(robot, q, fun):
     return (lambda v: fun(integrate_kernel(robot, q, v))), jnp.zeros(robot.nv, q.dtype)
 
 
-def _jacobian_dot(robot, f, reference, q, qd, pt):
+def _jacobian_dot_kernel(robot, q, frame, qd, point, reference):
     def J(qq):
-        return jacobian_pass(robot, qq, f, pt, reference).matrix()
+        return jacobian_pass(robot, qq, frame, point, reference).matrix()
 
     g, x0 = _tangent(robot, q, J)
     return jax.jvp(g, (x0,), (qd,))[1]
@@ -147,12 +147,12 @@ def jacobian_dot_qd(
     [-1.0, -1.0]
     """
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, reference, "jk.jacobian_dot_qd")
-    return eager(_jacobian_dot_qd, robot, (f, reference), q, qd, pt)
+    return _jacobian_dot_qd(robot, q, f, qd, pt, reference)
 
 
-def _jacobian_dot_qd(robot, f, reference, q, qd, pt):
+def _jacobian_dot_qd_kernel(robot, q, frame, qd, point, reference):
     def V(qq):
-        return jacobian_pass(robot, qq, f, pt, reference).times(qd)
+        return jacobian_pass(robot, qq, frame, point, reference).times(qd)
 
     g, x0 = _tangent(robot, q, V)
     return jax.jvp(g, (x0,), (qd,))[1]
@@ -190,12 +190,12 @@ def kinematic_hessian(
     fn = "jk.kinematic_hessian"
     hint = f"jax.vmap(lambda q: {fn}(robot, q))(qs)"
     q, _, f, pt = _check_call(robot, q, None, frame, point, reference, fn, hint)
-    return eager(_hessian, robot, (f, reference), q, pt)
+    return _hessian(robot, q, f, pt, reference)
 
 
-def _hessian(robot, f, reference, q, pt):
+def _hessian_kernel(robot, q, frame, point, reference):
     def J(qq):
-        return jacobian_pass(robot, qq, f, pt, reference).matrix()
+        return jacobian_pass(robot, qq, frame, point, reference).matrix()
 
     g, x0 = _tangent(robot, q, J)
     dJ = jax.jacfwd(g)(x0)  # (6, dof_j, dof_k)
@@ -251,7 +251,7 @@ def analytical_jacobian_dot(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
-    Jad, margin = eager(_analytical_dot, robot, (f, representation), q, qd, pt)
+    Jad, margin = _analytical_dot(robot, q, f, qd, pt, representation)
     return _singular_guard(Jad, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 
@@ -271,24 +271,31 @@ def analytical_jacobian_dot_qd(
     check_representation(representation)
     fn = "jk.analytical_jacobian_dot_qd"
     q, qd, f, pt = _check_call(robot, q, qd, frame, point, "world_aligned", fn)
-    acc, margin = eager(_analytical_dot_qd, robot, (f, representation), q, qd, pt)
+    acc, margin = _analytical_dot_qd(robot, q, f, qd, pt, representation)
     return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 
-def _analytical_dot(robot, f, representation, q, qd, pt):
+def _analytical_dot_kernel(robot, q, frame, qd, point, representation):
     def Ja(qq):
-        return analytical_jacobian_pass(robot, qq, f, pt, representation)
+        return analytical_jacobian_pass(robot, qq, frame, point, representation)
 
     g, x0 = _tangent(robot, q, Ja)
     (_, margin), (Jad, _) = jax.jvp(g, (x0,), (qd,))
     return Jad, margin
 
 
-def _analytical_dot_qd(robot, f, representation, q, qd, pt):
+def _analytical_dot_qd_kernel(robot, q, frame, qd, point, representation):
     def xd(qq):
-        Ja, margin = analytical_jacobian_pass(robot, qq, f, pt, representation)
+        Ja, margin = analytical_jacobian_pass(robot, qq, frame, point, representation)
         return Ja @ qd, margin
 
     g, x0 = _tangent(robot, q, xd)
     (_, margin), (acc, _) = jax.jvp(g, (x0,), (qd,))
     return acc, margin
+
+
+_jacobian_dot = eager(_jacobian_dot_kernel, ("frame", "reference"))
+_jacobian_dot_qd = eager(_jacobian_dot_qd_kernel, ("frame", "reference"))
+_hessian = eager(_hessian_kernel, ("frame", "reference"))
+_analytical_dot = eager(_analytical_dot_kernel, ("frame", "representation"))
+_analytical_dot_qd = eager(_analytical_dot_qd_kernel, ("frame", "representation"))

@@ -57,12 +57,12 @@ from ._checks import (
     refuse_multi_dof,
     refuse_nonfinite,
 )
+from ._forward import frame_pose
+from ._jacobian_pass import jacobian_pass
 from ._jit import robot_jit
 from ._linalg import unrolled_cholesky
 from .errors import JaxkinError, ShapeError
 from .ik_gradients import full_rank, solution_tangent
-from .jacobians import jacobian_pass
-from .kinematics import frame_pose
 from .model import Robot
 from .optimizers import default_optimizer
 from .placements import joint_placements

@@ -61,8 +61,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from ._jacobian_pass import jacobian_pass
 from ._linalg import unrolled_cholesky
-from .jacobians import jacobian_pass
 from .pose_errors import pose_residual
 
 __all__ = ["damped_pinv_apply", "full_rank", "solution_tangent"]

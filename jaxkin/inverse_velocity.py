@@ -48,9 +48,9 @@ from ._checks import (
     refuse_multi_dof,
     result_dtype,
 )
+from ._jacobian_pass import jacobian_pass
 from ._jit import robot_jit
 from .errors import JaxkinError, ShapeError
-from .jacobians import jacobian_pass
 from .model import Robot
 from .pose_errors import pose_error
 from .spatial import safe_norm, safe_sqrt

@@ -1,434 +1,39 @@
-"""Forward kinematics: poses of every frame, and the one forward pass the Jacobians reuse.
+"""Forward kinematics: the pose of one frame, of several frames, or of every frame.
 
 All poses are in the world frame (the frame ``robot.base`` is expressed in; the robot's base frame
-when ``base`` is None): ``T_world_frame``, shape (4, 4). Kernels take one configuration ``q`` of
-shape ``(nq,)``; batch with ``jax.vmap``.
+when ``base`` is None): ``T_world_frame``, shape (4, 4). Each function takes one configuration
+``q`` of shape ``(nq,)``; batch with ``jax.vmap``.
 
 Free and ball joints' quaternions (and planar joints' (cos, sin) pairs) are normalised inside the
 kernel, as MuJoCo's ``mj_kinematics`` does: any nonzero quaternion is the rotation of its unit
 multiple. A zero or non-finite one raises a :class:`~jaxkin.JaxkinError` when called eagerly and
 gives NaN under ``jit``/``vmap``.
+
+Only the joints on the paths to the frames asked for are computed, once however many of those
+frames they move. A path of many joints whose constants do not fold runs through ``lax.scan``
+(:func:`uses_scan`).
 """
 
 from __future__ import annotations
 
-import functools
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
-import jax.numpy as jnp
-import numpy as np
 
-from . import _fold as fold
-from . import spatial
-from ._checks import check_q, is_traced, result_dtype
+from ._checks import check_frames, check_q
+from ._forward import all_frame_transforms, frame_transform, frame_transforms, uses_scan
 from ._jit import eager
-from .model import JOINT_SIZES, Robot
-from .placements import joint_placements
+from .model import Robot
 
 __all__ = [
-    "ForwardPass",
-    "ScalarPass",
     "fk",
     "fk_all",
-    "forward_pass",
-    "frame_pose",
-    "path_joints",
-    "scalar_pass",
-    "scan_joints",
-    "scan_pass",
-    "unfolded_joints",
     "uses_scan",
 ]
 
-
-class _Constants(NamedTuple):
-    """Per-joint constants as scalars: Python floats (folded) or JAX scalars (traced)."""
-
-    B: list | None  # per joint (Mat, Vec)
-    A: list | None
-    axis: list  # per joint Vec
-    offset: list
-    mult: list
-    base: tuple  # (Mat, Vec)
-    tool: tuple | None
-
-
-SNAP = 1e-15
-
-
-def snap_tolerance(dtype) -> float:
-    """How far from 0 or +-1 a concrete constant of a robot stored in ``dtype`` is taken as exact.
-
-    float64: 1e-15 (``cos(pi/2)`` evaluates to 6e-17). float32: the angles themselves are rounded
-    to float32 (``float32(pi/2)`` is 4.4e-8 from pi/2, so its cosine is -4.4e-8), up to half an
-    ulp of an angle below 2 pi: 2.4e-7; ``4 * eps32`` (4.8e-7) covers it. Snapping moves a float32
-    result by about that much times the reach, far inside float32 tolerances, and gives the
-    float32 program the structure of the float64 one (the +-90 degree placements fold away).
-    """
-    return max(SNAP, 4.0 * float(np.finfo(np.dtype(dtype)).eps))
-
-
-def _snap(x, tol: float = SNAP) -> float:
-    """A concrete constant as a Python float; within ``tol`` of 0 or +-1 it is taken as exact
-    (see :func:`snap_tolerance`), so +-90 degree placements fold away."""
-    x = float(x)
-    for exact in (0.0, 1.0, -1.0):
-        if abs(x - exact) <= tol:
-            return exact
-    return x
-
-
-def _scalars(x, to_scalar):
-    if getattr(x, "ndim", 0) == 0:
-        return to_scalar(x)
-    return tuple(_scalars(x[i], to_scalar) for i in range(x.shape[0]))
-
-
-def _constants(robot: Robot, dtype, joints: list | None = None) -> _Constants:
-    """Everything the forward pass needs from the model, as scalars.
-
-    With concrete leaves (a robot closed over by ``jit``, or eager use) the constants are Python
-    floats computed in float64 and folded into the kernel; with traced leaves (``jit`` over the
-    robot, ``grad`` with respect to its parameters, ``vmap`` over a stack of robots) they are JAX
-    scalars and new values never retrace. Only the ``joints`` listed (default: all) are
-    converted; the per-joint lists hold None for the others.
-    """
-    if not is_traced(robot):
-        xp, conv = np, lambda a: np.asarray(a, dtype=np.float64)
-        tol = snap_tolerance(robot.dtype)
-        to_scalar = lambda a: _snap(a, tol)  # noqa: E731
-    else:
-        xp, conv = jnp, lambda a: jnp.asarray(a).astype(dtype)
-        to_scalar = lambda a: a  # noqa: E731
-    place = joint_placements(robot, dtype, xp=xp)
-    n = robot.n_joints
-    idx = range(n) if joints is None else joints
-
-    def per_joint(a) -> list:
-        out: list = [None] * n
-        if joints is not None and xp is jnp:
-            # one gather of the path's rows: its transpose (grad over the robot) is one
-            # scatter, not one full-size pad per joint
-            a = a[np.asarray(joints, dtype=np.int32)]
-            for k, j in enumerate(joints):
-                out[j] = _scalars(a[k], to_scalar)
-            return out
-        for j in idx:
-            out[j] = _scalars(a[j], to_scalar)
-        return out
-
-    def pairs(pl):
-        if pl is None:
-            return None
-        return list(zip(per_joint(pl[0]), per_joint(pl[1]), strict=True))
-
-    if robot.parameterisation != "placement":
-        axis = [(0.0, 0.0, 1.0)] * n  # DH joints move about z by construction
-    else:
-        axis = per_joint(conv(robot.axis))
-    base = conv(robot.base)
-    tool = conv(robot.tool)
-    return _Constants(
-        B=pairs(place.B),
-        A=pairs(place.A),
-        axis=axis,
-        offset=per_joint(conv(robot.offset)),
-        mult=per_joint(conv(robot.multiplier)),
-        base=(_scalars(base[:3, :3], to_scalar), _scalars(base[:3, 3], to_scalar)),
-        tool=(_scalars(tool[:3, :3], to_scalar), _scalars(tool[:3, 3], to_scalar))
-        if robot.has_tool
-        else None,
-    )
-
-
-def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
-    """cos and sin of each revolute joint's value among ``joints``, computed once and together.
-
-    The optimisation barrier asks XLA not to re-derive them inside each fusion of the kernel
-    (its CPU pipeline may still drop it; see PERFORMANCE.md).
-    """
-    values = {}
-    for j in joints:
-        if robot.kinds[j] == "revolute":
-            values[j] = fold.add(fold.mul(K.mult[j], qv[robot.q_index[j]]), K.offset[j])
-    if not values:
-        return {}
-    keys = list(values)
-    v = jnp.stack([jnp.asarray(values[j]) for j in keys])
-    c, s = jax.lax.optimization_barrier((jnp.cos(v), jnp.sin(v)))
-    return {j: (c[i], s[i]) for i, j in enumerate(keys)}
-
-
-_MULTI = ("free", "ball", "planar")
-
-
-def joint_motion(kind: str, coords: list) -> tuple:
-    """``(R, t)`` of a free, ball or planar joint's motion (child frame in the joint frame) from
-    its coordinates (see :mod:`jaxkin.configuration`); ``t`` is None for a ball joint."""
-    if kind == "free":
-        return spatial.quaternion_rotation(*coords[3:]), tuple(coords[:3])
-    if kind == "ball":
-        return spatial.quaternion_rotation(*coords), None
-    x, y, c, s = coords
-    c, s = spatial.max_scaled(c, s)
-    inv = jax.lax.rsqrt(c * c + s * s)
-    c, s = c * inv, s * inv
-    return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)), (x, y, 0.0)
-
-
-class ScalarPass(NamedTuple):
-    """The forward pass as nested tuples of scalars (constants folded); see :class:`ForwardPass`.
-
-    When the pass was asked for some frames only, the entries of frames and joints off their
-    paths are None."""
-
-    R: list  # per frame: Mat
-    p: list  # per frame: Vec
-    z: list  # per joint: Vec
-    o: list  # per joint: Vec
-    dtype: Any
-
-
-def path_joints(robot: Robot, frames) -> list:
-    """Joints on the paths from the base to ``frames`` (frame indices), in increasing order."""
-    joints: set = set()
-    for f in frames:
-        joints.update(robot.ancestors(f))
-    return sorted(joints)
-
-
-def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
-    """One pass from the base to every frame (or to ``frames`` only: frame indices), elementwise
-    and with constants folded.
-
-    Each joint's sin and cos are computed once; placements are composed entry by entry, so XLA
-    fuses the kernel into a single loop over a batch. With ``frames`` only the joints on their
-    paths are traced (one frame of a large tree costs its depth, not the tree's size). ``q`` must
-    be validated (``check_q``).
-    """
-    dtype = result_dtype(robot, q)
-    q = q.astype(dtype)
-    n = robot.n_joints
-    joints = list(range(n)) if frames is None else path_joints(robot, frames)
-    K = _constants(robot, dtype, None if frames is None else joints)
-    used = sorted(
-        {
-            robot.q_index[j] + k
-            for j in joints
-            if robot.kinds[j] != "fixed"
-            for k in range(JOINT_SIZES[robot.kinds[j]][0])
-        }
-    )
-    qv = {i: q[i] for i in used}
-    trig = _joint_trig(robot, K, qv, joints)
-    Rs: list = [None] * robot.n_frames
-    ps: list = [None] * robot.n_frames
-    zs: list = [None] * n
-    os: list = [None] * n
-    Rs[0], ps[0] = K.base
-    for j in joints:
-        kind, parent, qi = robot.kinds[j], robot.parents[j], robot.q_index[j]
-        R, p = Rs[parent], ps[parent]
-        if K.B is not None:
-            Rb, pb = K.B[j]
-            p = fold.vadd(p, fold.matvec(R, pb))
-            R = fold.matmul(R, Rb)
-        z = fold.matvec(R, K.axis[j])
-        zs[j] = z
-        os[j] = p
-        if kind in _MULTI:
-            M, t = joint_motion(kind, [qv[qi + k] for k in range(JOINT_SIZES[kind][0])])
-            if t is not None:
-                p = fold.vadd(p, fold.matvec(R, t))
-            R = fold.matmul(R, M)
-        elif kind != "fixed":
-            value = fold.add(fold.mul(K.mult[j], qv[qi]), K.offset[j])
-            if kind == "revolute":
-                M = fold.rotation_about(K.axis[j], *trig[j])
-                R = fold.matmul(R, M)
-            else:
-                p = fold.vadd(p, fold.vscale(z, value))
-        if K.A is not None:
-            Ra, pa = K.A[j]
-            p = fold.vadd(p, fold.matvec(R, pa))
-            R = fold.matmul(R, Ra)
-        Rs[j + 1] = R
-        ps[j + 1] = p
-    if K.tool is not None and (frames is None or n + 1 in frames):
-        R, p = Rs[n], ps[n]
-        ps[n + 1] = fold.vadd(p, fold.matvec(R, K.tool[1]))
-        Rs[n + 1] = fold.matmul(R, K.tool[0])
-    return ScalarPass(R=Rs, p=ps, z=zs, o=os, dtype=dtype)
-
-
-class ForwardPass(NamedTuple):
-    """Everything one pass down the tree yields, all in world coordinates.
-
-    ``R`` (n_frames, 3, 3) and ``p`` (n_frames, 3): frame orientations and origins;
-    ``z`` (n_joints, 3): each joint's unit axis; ``o`` (n_joints, 3): a point on each joint's axis
-    (the origin of the frame in which the joint moves: o_{i-1} of Table 4.1 in standard DH).
-    """
-
-    R: jax.Array
-    p: jax.Array
-    z: jax.Array
-    o: jax.Array
-
-
-SCAN_MIN_JOINTS = 32
-"""A path of at least this many joints runs through ``lax.scan`` (compile time independent of
-its length)."""
-
-SCAN_MIN_UNFOLDED = 8
-"""A path with at least this many joints whose constants do not fold (:func:`unfolded_joints`)
-runs through ``lax.scan`` too. Unrolled, XLA's CPU compiler copies the shared forward pass into
-every output it fuses, so the program grows with the square of the depth (one Jacobian of a
-15-joint random tree: 107,000 HLO lines, 23 s to compile), and beyond about 8 such joints the
-unrolled kernel is also the slower one (random DH chains of 8 joints: compile 2.1 s against
-0.44 s, 0.30 against 0.48 M Jacobians/s batched). Robots whose placements are +-90 degree turns
-about coordinate axes (the Panda, the UR arms) fold almost entirely and stay unrolled."""
-
-
-def unfolded_joints(robot: Robot) -> np.ndarray:
-    """Per joint, True when its constants do not fold away (a placement rotation that is not a
-    signed permutation, or a tilted axis); every joint of a robot with traced leaves."""
-    if is_traced(robot):
-        return np.ones(robot.n_joints, dtype=bool)
-    return _unfolded_joints(robot)
-
-
-@functools.lru_cache(maxsize=64)
-def _unfolded_joints(robot: Robot) -> np.ndarray:
-    tol = snap_tolerance(robot.dtype)
-
-    def exact(a) -> np.ndarray:  # per joint: every entry within tol of 0 or +-1
-        a = np.abs(np.asarray(a, dtype=np.float64)).reshape(robot.n_joints, -1)
-        return np.all((a <= tol) | (np.abs(a - 1.0) <= tol), axis=1)
-
-    place = joint_placements(robot, np.float64, xp=np)
-    folds = np.ones(robot.n_joints, dtype=bool)
-    for pl in (place.B, place.A):
-        if pl is not None:
-            folds &= exact(pl[0])
-    if robot.parameterisation == "placement":
-        folds &= exact(robot.axis)
-    return ~folds
-
-
-def scan_joints(robot: Robot, frame: int | None = None) -> tuple[int, ...] | None:
-    """The joints a ``lax.scan`` pass runs over, or None for the unrolled :func:`scalar_pass`.
-
-    ``frame=None``: the whole robot, scanned when it is a serial chain; a frame index: the joints
-    on that frame's path from the base (one frame of a large tree costs its depth). Scanned when
-    the path has at least :data:`SCAN_MIN_JOINTS` joints or :data:`SCAN_MIN_UNFOLDED` joints whose
-    constants do not fold, and only 1-dof and fixed joints.
-    """
-    n = robot.n_joints
-    if frame is None:
-        if robot.parents != tuple(range(n)):
-            return None
-        path = tuple(range(n))
-    else:
-        path = robot.ancestors(frame)
-    if any(robot.kinds[j] not in ("revolute", "prismatic", "fixed") for j in path):
-        return None
-    if len(path) >= SCAN_MIN_JOINTS or (
-        len(path) >= SCAN_MIN_UNFOLDED
-        and int(np.sum(unfolded_joints(robot)[list(path)])) >= SCAN_MIN_UNFOLDED
-    ):
-        return path
-    return None
-
-
-def uses_scan(robot: Robot) -> bool:
-    """Whether the whole robot's forward pass runs through ``lax.scan`` (:func:`scan_joints`)."""
-    return scan_joints(robot) is not None
-
-
-def scan_pass(robot: Robot, q: jax.Array, joints=None, tool: bool = False) -> ForwardPass:
-    """The forward pass along a serial path as one ``lax.scan`` step per joint.
-
-    ``joints``: the path (joint indices from the base, each joint's parent frame the previous
-    joint's child; default every joint of a serial chain). Every joint is the same step: ``B``,
-    then a rotation by ``is_revolute * value`` about the axis and a translation by
-    ``is_prismatic * value`` along it, then ``A`` (fixed joints have both flags 0). Compile time
-    does not grow with the number of joints. The result has the base, then one frame per path
-    joint (then the tool frame, for the whole chain or with ``tool=True``) in ``R`` and ``p``, and
-    one entry per path joint in ``z`` and ``o``.
-    """
-    dtype = result_dtype(robot, q)
-    q = q.astype(dtype)
-    n = robot.n_joints
-    path = np.arange(n) if joints is None else np.asarray(joints, dtype=np.int64).reshape(-1)
-    m = len(path)
-    # Concrete robots: the constants in float64 numpy, only the path's rows embedded (a frame of
-    # a 10,000-joint tree carries its depth, not the tree). Traced: gathered in the program.
-    xp = jnp if is_traced(robot) else np
-    conv = (lambda a: a.astype(dtype)) if xp is jnp else (lambda a: np.asarray(a, np.float64))
-
-    def take(a) -> jax.Array:
-        return jnp.asarray(a[path], dtype=dtype)
-
-    place = joint_placements(robot, dtype, xp=xp)
-    eye = jnp.broadcast_to(jnp.eye(3, dtype=dtype), (m, 3, 3))
-    zero3 = jnp.zeros((m, 3), dtype=dtype)
-    B_R, B_p = (take(place.B[0]), take(place.B[1])) if place.B is not None else (eye, zero3)
-    A_R, A_p = (take(place.A[0]), take(place.A[1])) if place.A is not None else (eye, zero3)
-    if robot.parameterisation != "placement":
-        axis = jnp.broadcast_to(jnp.array([0.0, 0.0, 1.0], dtype=dtype), (m, 3))
-    else:
-        axis = take(conv(robot.axis))
-    kinds = np.array(robot.kinds, dtype=object)[path] if m else np.array([], dtype=object)
-    is_rev = jnp.asarray(kinds == "revolute", dtype=dtype)
-    is_pri = jnp.asarray(kinds == "prismatic", dtype=dtype)
-    qidx = np.maximum(np.array(robot.q_index, dtype=np.int64)[path], 0)
-    value = take(conv(robot.multiplier)) * q[qidx] + take(conv(robot.offset))
-    base = robot.base.astype(dtype)
-
-    def step(carry, x):
-        R, p = carry
-        BR, Bp, ax, val, rev, pri, AR, Ap = x
-        p = p + R @ Bp
-        R = R @ BR
-        z = R @ ax
-        o = p
-        angle = rev * val
-        R = R @ spatial.rotation_about_axis(ax, angle)
-        p = p + z * (pri * val)
-        p = p + R @ Ap
-        R = R @ AR
-        return (R, p), (R, p, z, o)
-
-    xs = (B_R, B_p, axis, value, is_rev, is_pri, A_R, A_p)
-    _, (Rs, ps, zs, os) = jax.lax.scan(step, (base[:3, :3], base[:3, 3]), xs)
-    Rs = jnp.concatenate([base[None, :3, :3], Rs])
-    ps = jnp.concatenate([base[None, :3, 3], ps])
-    if robot.has_tool and (joints is None or tool):
-        tool = robot.tool.astype(dtype)
-        Rs = jnp.concatenate([Rs, (Rs[-1] @ tool[:3, :3])[None]])
-        ps = jnp.concatenate([ps, (ps[-1] + Rs[-2] @ tool[:3, 3])[None]])
-    return ForwardPass(R=Rs, p=ps, z=zs, o=os)
-
-
-def forward_pass(robot: Robot, q: jax.Array) -> ForwardPass:
-    """One pass from the base to every frame, as stacked arrays; q must be validated."""
-    if uses_scan(robot):
-        return scan_pass(robot, q)
-    sp = scalar_pass(robot, q)
-    st = lambda x: fold.stack_matrix(x, sp.dtype)  # noqa: E731
-    return ForwardPass(R=st(sp.R), p=st(sp.p), z=st(sp.z), o=st(sp.o))
-
-
-def frame_pose(robot: Robot, q: jax.Array, frame: int) -> tuple[jax.Array, jax.Array]:
-    """``(R, p)`` of one frame (by index) in world coordinates; q must be validated."""
-    path = scan_joints(robot, frame)
-    if path is not None:
-        is_tool = robot.has_tool and frame == robot.n_joints + 1
-        fp = scan_pass(robot, q, path, tool=is_tool)
-        return fp.R[-1], fp.p[-1]
-    sp = scalar_pass(robot, q, frames=(frame,))
-    return fold.stack_matrix(sp.R[frame], sp.dtype), fold.stack_matrix(sp.p[frame], sp.dtype)
+_fk = eager(frame_transform, ("frame",))
+_fk_several = eager(frame_transforms, ("frames",))
+_fk_all = eager(all_frame_transforms)
 
 
 def fk_all(robot: Robot, q: Any) -> jax.Array:
@@ -444,19 +49,16 @@ def fk_all(robot: Robot, q: Any) -> jax.Array:
     >>> bool(jnp.allclose(Ts[-1], jk.fk(robot, q)))  # the last frame is the tip
     True
     """
-    return eager(_fk_all, robot, (), check_q(robot, q, fn="jk.fk_all", host=True))
+    return _fk_all(robot, check_q(robot, q, fn="jk.fk_all", host=True))
 
 
-def _fk_all(robot: Robot, q: jax.Array) -> jax.Array:
-    if uses_scan(robot):
-        fp = scan_pass(robot, q)
-        return jax.vmap(spatial.make_transform)(fp.R, fp.p)
-    sp = scalar_pass(robot, q)
-    return jnp.stack([_pose(R, p, sp.dtype) for R, p in zip(sp.R, sp.p, strict=True)])
+def fk(robot: Robot, q: Any, frame: Any = None) -> jax.Array:
+    """Pose ``T_world_frame`` of one frame (default: the tip, tool included), shape (4, 4); of
+    several frames, shape (k, 4, 4), when ``frame`` is a list or tuple of names and indices.
 
-
-def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
-    """Pose ``T_world_frame`` of one frame (default: the tip, tool included), shape (4, 4).
+    Several frames come from one forward pass: each joint on their paths is computed once (not
+    k calls); the result's row i equals ``fk(robot, q, frame=frames[i])``. Duplicates are
+    allowed; an empty list raises a :class:`~jaxkin.JaxkinError`.
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("two_link_planar")  # two unit links in the xy plane
@@ -465,27 +67,12 @@ def fk(robot: Robot, q: Any, frame: int | str | None = None) -> jax.Array:
     (4, 4)
     >>> T[:2, 3].round(6).tolist()  # the tip: link 1 along x, then link 2 along y
     [1.0, 1.0]
+    >>> Ts = jk.fk(robot, jnp.array([0.0, jnp.pi / 2]), frame=["link1", "link2"])
+    >>> Ts.shape, Ts[:, :2, 3].round(6).tolist()
+    ((2, 4, 4), [[1.0, 0.0], [1.0, 1.0]])
     """
     q = check_q(robot, q, fn="jk.fk", host=True)
-    return eager(_fk, robot, (robot.frame_index(frame),), q)
-
-
-def _fk(robot: Robot, f: int, q: jax.Array) -> jax.Array:
-    """:func:`frame_transform` in :func:`~jaxkin._jit.eager`'s order (static options first)."""
-    return frame_transform(robot, q, f)
-
-
-def frame_transform(robot: Robot, q: jax.Array, frame: int) -> jax.Array:
-    """``T_world_frame`` (4, 4) of one frame (by index): the pose of :func:`frame_pose` as one
-    matrix, the kernel of :func:`fk`; q must be validated. Only the joints on the frame's path
-    are computed."""
-    if scan_joints(robot, frame) is not None:
-        R, p = frame_pose(robot, q, frame)
-        return spatial.make_transform(R, p)
-    sp = scalar_pass(robot, q, frames=(frame,))
-    return _pose(sp.R[frame], sp.p[frame], sp.dtype)
-
-
-def _pose(R, p, dtype) -> jax.Array:
-    rows = [(*R[i], p[i]) for i in range(3)] + [(0.0, 0.0, 0.0, 1.0)]
-    return fold.stack_matrix(rows, dtype)
+    frames = check_frames(robot, frame, "jk.fk")
+    if frames is None:
+        return _fk(robot, q, robot.frame_index(frame))
+    return _fk_several(robot, q, frames)

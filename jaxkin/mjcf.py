@@ -52,6 +52,12 @@ What becomes what
   frames, ending at the body's frame.
 * Every site is a frame fixed to its body, named after it (``site:<name>`` when a body already
   has that name; an unnamed site ``site<id>``).
+* Masses: each body's frame gets MuJoCo's compiled ``body_mass``, ``body_ipos``,
+  ``body_iquat`` and ``body_inertia`` (from ``<inertial>``, or inferred from its geoms as the
+  compiler does), for :func:`jaxkin.center_of_mass`; joint anchor and site frames are
+  massless. Where MuJoCo would infer a body's mass from a mesh, height field or SDF geom,
+  which jaxkin does not read, the model has no inertial data (``robot.has_inertia`` is False;
+  give such bodies an ``<inertial>``).
 * ``<equality joint1 joint2 polycoef>`` with a linear polynomial (``a2 = a3 = a4 = 0``), active
   at start, makes ``joint1`` a mimic joint of ``joint2``: MuJoCo's ``y - y0 = a0 + a1 (x - x0)``
   (``y0``, ``x0`` from ``qpos0``). It is not an entry of ``q``; its Jacobian column folds into
@@ -360,15 +366,20 @@ def _compiler_error(e: Exception, label: str, what: str) -> MJCFError:
     )
 
 
-def _strip_assets(mujoco, spec) -> None:
+def _strip_assets(mujoco, spec) -> set[str]:
     """Drop every file-backed asset (meshes, height fields, skins, textures): geoms that use
-    them become small spheres (no frame depends on a geom's shape)."""
+    them become small spheres (no frame depends on a geom's shape). Returns the names of the
+    bodies whose mass MuJoCo would infer from such a geom (:func:`_weighs`): their compiled
+    masses are those of the spheres, not the file's."""
     file_shapes = {mujoco.mjtGeom.mjGEOM_MESH, mujoco.mjtGeom.mjGEOM_HFIELD}
     sdf = getattr(mujoco.mjtGeom, "mjGEOM_SDF", None)
     if sdf is not None:
         file_shapes.add(sdf)
+    unknown: set[str] = set()
     for g in spec.geoms:
         if g.type in file_shapes:
+            if _weighs(mujoco, spec, g):
+                unknown.add(g.parent.name)
             g.type = mujoco.mjtGeom.mjGEOM_SPHERE
             g.meshname = ""
             g.hfieldname = ""
@@ -378,15 +389,33 @@ def _strip_assets(mujoco, spec) -> None:
     for group in (spec.skins, spec.meshes, spec.hfields, spec.textures):
         for item in list(group):
             spec.delete(item)
+    return unknown
+
+
+def _weighs(mujoco, spec, g) -> bool:
+    """Whether geom ``g`` adds to its body's compiled mass and inertia (MuJoCo's rules: the
+    compiler's ``inertiafromgeom``, ``inertiagrouprange``, the body's explicit ``<inertial>``,
+    the geom's ``mass`` or ``density``)."""
+    rule = spec.compiler.inertiafromgeom
+    modes = mujoco.mjtInertiaFromGeom
+    if rule == modes.mjINERTIAFROMGEOM_FALSE:
+        return False
+    if rule == modes.mjINERTIAFROMGEOM_AUTO and g.parent.explicitinertial:
+        return False
+    lo, hi = (int(x) for x in spec.compiler.inertiagrouprange)
+    if not lo <= int(g.group) <= hi:
+        return False
+    mass = float(g.mass)
+    return mass > 0.0 if math.isfinite(mass) else float(g.density) > 0.0
 
 
 def _compile(source: Any, max_bodies: int):
     mujoco = _mujoco()
     spec, label = _spec(mujoco, source, max_bodies)
-    _strip_assets(mujoco, spec)
+    unknown = _strip_assets(mujoco, spec)
     spec.compiler.fusestatic = False  # every body stays a frame
     try:
-        return mujoco, spec.compile(), label, spec.modelname
+        return mujoco, spec.compile(), label, spec.modelname, unknown
     except ValueError as e:
         raise _compiler_error(e, label, "MuJoCo could not compile the model") from None
 
@@ -480,6 +509,30 @@ def _all_specs(mujoco, m, label: str) -> tuple[list[dict[str, Any]], dict[str, s
         taken.add(child)
         specs.append(_fixed(f"site:{sites[s]}", bodies[b], child, T))
     return specs, {s["child"]: s["parent"] for s in specs}
+
+
+def _inertial(m, b: int) -> dict[str, Any]:
+    """Body ``b``'s compiled mass, centre of mass and principal inertia (``body_mass``,
+    ``body_ipos``, ``body_iquat``, ``body_inertia``) as a :func:`jaxkin.build.from_joints`
+    ``inertial``."""
+    ix, iy, iz = (float(x) for x in m.body_inertia[b])
+    return {
+        "mass": float(m.body_mass[b]),
+        "xyz": np.array(m.body_ipos[b], dtype=float),
+        "quat": np.array(m.body_iquat[b], dtype=float),
+        "inertia": (ix, 0.0, 0.0, iy, 0.0, iz),
+    }
+
+
+def _add_masses(m, specs: list[dict[str, Any]], bodies: list[str]) -> dict[str, Any]:
+    """Give each body's spec (the one whose child is the body) its :func:`_inertial`; returns
+    the world body's."""
+    index = {name: b for b, name in enumerate(bodies)}
+    for spec in specs:
+        b = index.get(spec["child"])
+        if b is not None and b > 0:
+            spec["inertial"] = _inertial(m, b)
+    return _inertial(m, 0)
 
 
 def _selection_error(label: str, e: SelectionError, root: str, known: Sequence[str]):
@@ -618,10 +671,11 @@ def load_mjcf(
     >>> [round(float(x), 6) for x in jk.fk(robot, [0.0, 1.5707963267948966])[:3, 3]]
     [1.0, 1.0, 0.0]
     """
-    mujoco, m, label, model_name = _compile(source, max_bodies)
+    mujoco, m, label, model_name, unknown = _compile(source, max_bodies)
     specs, parent_of = _all_specs(mujoco, m, label)
     root = "world" if base is None else base
     body_names, joint_names, _ = _names(mujoco, m)
+    world_mass = None if unknown else _add_masses(m, specs, body_names)
     if base is not None and base not in body_names:
         problem = SelectionError("", "base", base)
         raise _selection_error(label, problem, root, body_names)
@@ -632,6 +686,7 @@ def load_mjcf(
             base,
             tip,
             mimics=lambda names: _couplings(mujoco, m, label, names, joint_names),
+            root_inertial=world_mass,
         )
     except SelectionError as e:
         raise _selection_error(label, e, root, ["world", *parent_of]) from None
@@ -643,6 +698,7 @@ def load_mjcf(
             dtype=dtype,
             leaders=sel.leaders,
             default_frames=sel.default_frames,
+            root_inertial=sel.root_inertial,
         )
     except MJCFError:
         raise

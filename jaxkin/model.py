@@ -176,7 +176,12 @@ class Robot:
 
     Attributes (float leaves): ``params`` (read-only mapping of per-joint parameter arrays),
     ``axis`` (n, 3), ``offset`` (n,), ``multiplier`` (n,), ``lower``/``upper`` (nq,), ``base``
-    (4, 4) = T_world_base, ``tool`` (4, 4) = T_flange_tool.
+    (4, 4) = T_world_base, ``tool`` (4, 4) = T_flange_tool; the inertial data of each frame (a
+    URDF link's ``<inertial>``, a MuJoCo body's compiled mass; zeros where a frame has none):
+    ``frame_mass`` (n_frames,) in kg, ``frame_com`` (n_frames, 3) the centre of mass in the
+    frame, ``frame_inertia`` (n_frames, 3, 3) the rotational inertia about the centre of mass in
+    the frame's axes. ``has_inertia`` (static) says whether the description gave any inertial
+    data (False for DH robots and for a URDF without ``<inertial>``); :attr:`mass` is the total.
 
     A robot is a value: its attributes cannot be assigned, :meth:`replace` returns an independent
     robot, and two robots with the same structure and the same numbers compare equal and hash
@@ -191,6 +196,9 @@ class Robot:
     upper: jax.Array = dataclasses.field(metadata=_LEAF)
     base: jax.Array = dataclasses.field(metadata=_LEAF)
     tool: jax.Array = dataclasses.field(metadata=_LEAF)
+    frame_mass: jax.Array = dataclasses.field(default=None, metadata=_LEAF)
+    frame_com: jax.Array = dataclasses.field(default=None, metadata=_LEAF)
+    frame_inertia: jax.Array = dataclasses.field(default=None, metadata=_LEAF)
     name: str = dataclasses.field(default="robot", metadata=_STRUCTURE)
     parameterisation: str = dataclasses.field(default="dh_standard", metadata=_STRUCTURE)
     kinds: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
@@ -204,6 +212,7 @@ class Robot:
         default=(), metadata=_STRUCTURE
     )
     default_frames: tuple[str, ...] = dataclasses.field(default=(), metadata=_STRUCTURE)
+    has_inertia: bool = dataclasses.field(default=False, metadata=_STRUCTURE)
 
     def __post_init__(self) -> None:
         if not self.v_index and all(JOINT_SIZES[k][0] <= 1 for k in self.kinds):
@@ -213,6 +222,10 @@ class Robot:
         for f in _LEAVES:
             if f != "params":
                 object.__setattr__(self, f, _as_leaf(getattr(self, f)))
+        for f in _INERTIAL:  # no inertial data given: zeros of the frames' shapes
+            if getattr(self, f) is None:
+                shape = _leaf_shape(self, f)
+                object.__setattr__(self, f, jnp.zeros(shape, dtype=jnp.asarray(self.base).dtype))
 
     # ------------------------------------------------------------------ pytree
     def tree_flatten(self):
@@ -410,6 +423,13 @@ class Robot:
         return np.dtype(self.base.dtype)
 
     @property
+    def mass(self) -> jax.Array:
+        """The total mass in kg: the sum of ``frame_mass`` (every frame, those fixed to the base
+        included; 0 for a robot without inertial data, see ``has_inertia``). A JAX scalar (one
+        per robot of a stack), traced inside ``jit``/``grad`` over the robot."""
+        return jnp.sum(self.frame_mass, axis=-1)
+
+    @property
     def joint_kinds(self) -> tuple[str, ...]:
         """Kind of the joint driven by each entry of ``q`` ("revolute", "prismatic", or "free",
         "ball", "planar" for each entry of such a joint)."""
@@ -476,7 +496,8 @@ class Robot:
 
         Each replaced array must have the shape of the one it replaces (``axis`` (n, 3),
         ``offset``/``multiplier`` (n,), ``lower``/``upper`` (nq,), ``base``/``tool`` (4, 4),
-        ``params`` the same names with their shapes; n joints, nq coordinates, after the change;
+        ``frame_mass`` (n_frames,), ``frame_com`` (n_frames, 3), ``frame_inertia`` (n_frames, 3,
+        3), ``params`` the same names with their shapes; n joints, nq coordinates, after the change;
         a stack of robots keeps its leading axes); otherwise :class:`~jaxkin.ShapeError` names
         the attribute, the shape wanted and the shape given (every array is checked when a
         structural attribute such as ``kinds`` changes). Integer and boolean arrays take the
@@ -553,6 +574,9 @@ def _leaf_shape(robot: Robot, name: str) -> tuple[int, ...]:
         "upper": (robot.nq,),
         "base": (4, 4),
         "tool": (4, 4),
+        "frame_mass": (robot.n_frames,),
+        "frame_com": (robot.n_frames, 3),
+        "frame_inertia": (robot.n_frames, 3, 3),
     }[name]
 
 
@@ -563,6 +587,8 @@ def _checked_leaf(name: str, x: Any, shape: tuple, batch: tuple, robot: Robot) -
     kind = np.dtype(x.dtype).kind if hasattr(x, "dtype") else "O"
     wanted = batch + shape
     sizes = f"n = {robot.n_joints} joints, nq = {robot.nq} coordinates"
+    if name in _INERTIAL:
+        sizes += f", n_frames = {robot.n_frames} frames"
     stack = f" (a stack of {batch} robots)" if batch else ""
     if kind not in "fiub":
         raise ShapeError(
@@ -596,4 +622,5 @@ def _check_params(robot: Robot, batch: tuple) -> None:
 
 
 _LEAVES = tuple(f.name for f in dataclasses.fields(Robot) if f.metadata["leaf"])
+_INERTIAL = ("frame_mass", "frame_com", "frame_inertia")
 _STATIC = tuple(f.name for f in dataclasses.fields(Robot) if not f.metadata["leaf"])

@@ -46,8 +46,8 @@ import numpy as np
 
 from . import spatial
 from ._checks import check_q, refuse_multi_dof, result_dtype
+from ._forward import forward_pass, frame_pose
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
-from .kinematics import forward_pass, frame_pose
 from .model import Robot
 from .sampling import sampling_bounds
 

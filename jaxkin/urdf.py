@@ -42,6 +42,13 @@ What is read, and how
   independent joint at their end; a mimic joint whose leader lies outside a ``tip``/``base``
   selection is driven by the leader's entry of ``q`` all the same (named after the leader, with
   the leader's limits).
+* ``<inertial>`` of a link (``<mass value>``, ``<inertia ixx ixy ixz iyy iyz izz>``, both
+  required in it as urdfdom requires; optional ``<origin xyz rpy>``) becomes that frame's mass,
+  centre of mass and inertia (``robot.frame_mass``, ``frame_com``, ``frame_inertia``, for
+  :func:`jaxkin.center_of_mass`); a link without one is massless. A negative mass is refused;
+  the inertia is taken as written, not checked for positive semi-definiteness or the triangle
+  inequality (files in use miss them by rounding, e.g. moments of -5e-20, and urdfdom and
+  Pinocchio load them).
 * Names: ``robot.joint_names`` are the independent joints in ``q`` order: depth-first from the
   root, siblings in file order. (Pinocchio, through urdfdom, visits siblings sorted by joint
   name instead, so its ``q`` order can differ on trees: match joints by name.)
@@ -131,6 +138,7 @@ __all__ = [
     "XACRO_MAX_ELEMENTS",
     "XACRO_TIME_LIMIT",
     "URDFError",
+    "URDFInertial",
     "URDFJoint",
     "URDFLink",
     "URDFMimic",
@@ -145,8 +153,9 @@ DEFAULT_MAX_BYTES = 16 * 1024 * 1024
 
 MAX_MAGNITUDE = 1e6
 """Largest magnitude accepted for a length in metres (origin ``xyz``), an origin angle in radians
-(``rpy``) or a mimic multiplier or offset. Anything larger is a typo or a unit error, and would
-overflow (or lose every digit of) the kinematics; joint limits are not capped."""
+(``rpy``), a mimic multiplier or offset, a mass in kg or a moment of inertia in kg m^2.
+Anything larger is a typo or a unit error, and would overflow (or lose every digit of) the
+kinematics; joint limits are not capped."""
 
 MOVING_TYPES = ("revolute", "continuous", "prismatic")
 """The one-DOF joint types (entries of ``q`` one for one)."""
@@ -252,11 +261,30 @@ def _show(value: str) -> str:
 
 # ---------------------------------------------------------------------------------- description
 @dataclass(frozen=True)
+class URDFInertial:
+    """A link's ``<inertial>``: ``mass`` (kg), ``xyz``/``rpy`` (its ``<origin>``: the centre of
+    mass and the inertia's axes in the link frame), ``inertia`` (``ixx, ixy, ixz, iyy, iyz,
+    izz`` about the centre of mass in those axes, kg m^2)."""
+
+    mass: float
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    inertia: tuple[float, float, float, float, float, float]
+    line: int | None
+
+    def spec(self) -> dict[str, Any]:
+        """The ``inertial`` mapping of :func:`jaxkin.build.from_joints`."""
+        return {"mass": self.mass, "xyz": self.xyz, "rpy": self.rpy, "inertia": self.inertia}
+
+
+@dataclass(frozen=True)
 class URDFLink:
-    """A ``<link>``: its name and the line it is declared on."""
+    """A ``<link>``: its name, the line it is declared on and its ``<inertial>`` (None: a
+    massless link)."""
 
     name: str
     line: int | None
+    inertial: URDFInertial | None = None
 
 
 @dataclass(frozen=True)
@@ -671,7 +699,8 @@ class _Context:
                 element=owner,
                 attribute=attr,
                 value=elem.attrib.get(attr),
-                fix=f"URDF is in metres and radians; a value this large is a typo or a unit error "
+                fix=f"URDF is in SI units (metres, radians, kilograms); a value this large is a "
+                "typo or a unit error "
                 f"(jaxkin accepts |value| <= {MAX_MAGNITUDE:g}).",
             )
 
@@ -776,15 +805,52 @@ def _joint_type(ctx: _Context, elem: _Element, owner: str) -> str:
 
 def _joint_origin(ctx: _Context, elem: _Element, owner: str, name: str) -> tuple[tuple, tuple]:
     """``(xyz, rpy)`` of the joint's ``<origin>`` (zero where missing), bounded in magnitude."""
+    return _origin(ctx, elem, owner, f"<origin> of joint {name!r}")
+
+
+def _origin(ctx: _Context, elem: _Element, owner: str, where: str) -> tuple[tuple, tuple]:
+    """``(xyz, rpy)`` of ``elem``'s ``<origin>`` (zero where missing), bounded in magnitude."""
     xyz, rpy = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
     origin = ctx.single(elem, "origin", owner, required=False)
     if origin is not None:
-        where = f"<origin> of joint {name!r}"
         xyz = ctx.vector3(origin, where, "xyz", (0.0, 0.0, 0.0))
         ctx.bounded(xyz, origin, where, "xyz", "m")
         rpy = ctx.vector3(origin, where, "rpy", (0.0, 0.0, 0.0))
         ctx.bounded(rpy, origin, where, "rpy", "rad")
     return xyz, rpy
+
+
+_INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+
+
+def _inertial(ctx: _Context, link: _Element, name: str) -> URDFInertial | None:
+    """The link's ``<inertial>`` (None without one): ``<mass value>`` and ``<inertia>`` with its
+    six attributes are required (as urdfdom requires them), ``<origin>`` optional. A negative
+    mass is refused; the moments are taken as written (files in use hold -5e-20 for 0)."""
+    elem = ctx.single(link, "inertial", f"<link name={name!r}>", required=False)
+    if elem is None:
+        return None
+    owner = f"<inertial> of link {name!r}"
+    xyz, rpy = _origin(ctx, elem, owner, f"<origin> of {owner}")
+    mass_el = ctx.single(elem, "mass", owner, required=True)
+    where = f"<mass> of link {name!r}"
+    mass = ctx.number(mass_el, where, "value", None)
+    ctx.bounded((mass,), mass_el, where, "value", "kg")
+    if mass < 0.0:
+        raise ctx.error(
+            f"the mass {mass!r} is negative.",
+            mass_el,
+            element=where,
+            attribute="value",
+            value=mass_el.attrib.get("value"),
+            fix="give the link's mass in kg (>= 0; 0 for a massless frame).",
+        )
+    inertia_el = ctx.single(elem, "inertia", owner, required=True)
+    where = f"<inertia> of link {name!r}"
+    inertia = tuple(ctx.number(inertia_el, where, a, None) for a in _INERTIA)
+    for a, x in zip(_INERTIA, inertia, strict=True):
+        ctx.bounded((x,), inertia_el, where, a, "kg m^2")
+    return URDFInertial(float(mass), xyz, rpy, inertia, elem.line)  # type: ignore[arg-type]
 
 
 def _joint_axis(ctx: _Context, elem: _Element, owner: str, name: str, kind: str) -> tuple:
@@ -1083,7 +1149,7 @@ def parse_urdf(source: Any, *, max_bytes: int = DEFAULT_MAX_BYTES) -> URDFModel:
                     fix="link names must be unique: rename or delete one.",
                 )
             link_line[name] = elem.line
-            links.append(URDFLink(name, elem.line))
+            links.append(URDFLink(name, elem.line, _inertial(ctx, elem, name)))
         elif elem.tag == "joint":
             j = _joint(ctx, elem)
             if j.name in joint_line:
@@ -1130,8 +1196,10 @@ def _select(
     when ``floating``) and its URDF joints (parents first); a ``base`` below which the selection
     has no moving joint is refused (:func:`_refuse_motionless`)."""
     above = _FREE_ROOT if floating else None
+    mass = {link.name: link.inertial.spec() for link in model.links if link.inertial is not None}
+    specs = [_joint_spec(j, mass.get(j.child)) for j in model.joints]
     try:
-        sel = select([_joint_spec(j) for j in model.joints], model.root, base, tip, above=above)
+        sel = select(specs, model.root, base, tip, above=above, root_inertial=mass.get(model.root))
     except SelectionError as e:
         raise _selection_error(model, ctx, e, base) from None
     joints = [model.joints[i] for i in sel.index]
@@ -1304,6 +1372,7 @@ def load_urdf(
             dtype=dtype,
             leaders=sel.leaders,
             default_frames=sel.default_frames,
+            root_inertial=sel.root_inertial,
         )
     except URDFError:
         raise
@@ -1569,9 +1638,9 @@ def _check_max_bytes(max_bytes: Any) -> None:
         raise ModelError(f"max_bytes must be a positive integer, got {max_bytes!r}.")
 
 
-def _joint_spec(j: URDFJoint) -> dict[str, Any]:
+def _joint_spec(j: URDFJoint, inertial: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The :func:`jaxkin.build.from_joints` spec of a URDF joint (continuous -> revolute,
-    floating -> free)."""
+    floating -> free), with the ``inertial`` of its child link when it has one."""
     kinds = {"fixed": "fixed", "prismatic": "prismatic", "floating": "free", "planar": "planar"}
     spec: dict[str, Any] = {
         "name": j.name,
@@ -1581,6 +1650,8 @@ def _joint_spec(j: URDFJoint) -> dict[str, Any]:
         "xyz": j.xyz,
         "rpy": j.rpy,
     }
+    if inertial is not None:
+        spec["inertial"] = inertial
     if j.type not in MULTI_DOF_TYPES:
         spec["axis"] = j.axis
     if j.type in MOVING_TYPES:

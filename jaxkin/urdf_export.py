@@ -12,6 +12,10 @@ motion ``B_j Motion(axis_j, m_j q + o_j) A_j`` (see :mod:`jaxkin.model`) is writ
 * joints sharing one entry of ``q`` become URDF ``<mimic>`` joints of the first of them with
   multiplier ``m_j`` (offset 0: offsets live in the origins).
 
+Each frame's mass, centre of mass and inertia (``robot.has_inertia``) is written as its link's
+``<inertial>`` (origin ``rpy`` zero: the inertia in the link's axes), for the frames whose
+inertial data is not all zero.
+
 A base transform other than the identity adds a root link ``world`` (a fixed joint
 ``base_placement`` places ``base``); a tool adds the fixed joint ``tool_placement``. Numbers are
 written with ``repr`` (shortest round-tripping float64), orientations as URDF rpy
@@ -111,10 +115,51 @@ def to_urdf(robot: Robot, *, prismatic_limit: float | None = None) -> str:
         body += _fixed(
             _fresh("tool_placement", w.joints), w.frames[-2], w.frames[-1], _f64(robot.tool)
         )
-    lines += [f"  <link name={quoteattr(n)}/>" for n in w.frames + w.extra_links]
+    masses = _inertials(robot)
+    for n in w.frames + w.extra_links:
+        lines += _link(n, masses.get(n))
     lines += body
     lines.append("</robot>")
     return "\n".join(lines) + "\n"
+
+
+def _inertials(robot: Robot) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
+    """``{frame name: (mass, com, inertia)}`` of the frames whose inertial data is not all zero
+    (the root frame's too when there is none, so that ``has_inertia`` survives)."""
+    if not robot.has_inertia:
+        return {}
+    mass, com, inertia = (_f64(x) for x in (robot.frame_mass, robot.frame_com, robot.frame_inertia))
+    out = {
+        name: (float(mass[f]), com[f], inertia[f])
+        for f, name in enumerate(robot.frame_names)
+        if mass[f] != 0.0 or np.any(com[f] != 0.0) or np.any(inertia[f] != 0.0)
+    }
+    return out or {robot.frame_names[0]: (float(mass[0]), com[0], inertia[0])}
+
+
+def _link(name: str, inertial: tuple[float, np.ndarray, np.ndarray] | None) -> list[str]:
+    """A ``<link>``, with its ``<inertial>`` (centre of mass and inertia in the link's axes)."""
+    if inertial is None:
+        return [f"  <link name={quoteattr(name)}/>"]
+    mass, com, I = inertial
+    xyz = " ".join(_num(v) for v in com)
+    moments = " ".join(
+        f"{k}={quoteattr(_num(I[a, b]))}"
+        for k, (a, b) in zip(
+            ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"),
+            ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
+            strict=True,
+        )
+    )
+    return [
+        f"  <link name={quoteattr(name)}>",
+        "    <inertial>",
+        f'      <origin xyz={quoteattr(xyz)} rpy="0 0 0"/>',
+        f"      <mass value={quoteattr(_num(mass))}/>",
+        f"      <inertia {moments}/>",
+        "    </inertial>",
+        "  </link>",
+    ]
 
 
 def _f64(x) -> np.ndarray:

@@ -16,8 +16,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import (
+    check_frames,
     check_path,
     check_point,
+    check_points,
     check_q,
     check_reference,
     check_robot,
@@ -26,8 +28,9 @@ from ._checks import (
     host_side,
     result_dtype,
 )
+from ._jacobian_pass import geometric_pass, jacobian_pass
 from ._jit import eager
-from .jacobians import change_reference, jacobian_fwd, jacobian_pass
+from .jacobians import change_reference, jacobian_fwd
 from .model import Robot
 from .representations import (
     analytical_from_geometric,
@@ -52,11 +55,13 @@ def twist(
     robot: Robot,
     q: Any,
     qd: Any,
-    frame: int | str | None = None,
+    frame: Any = None,
     reference: str = "world_aligned",
     point: Any = None,
 ) -> jax.Array:
-    """Twist ``[v; omega] = J(q) @ qd`` of ``frame`` (default: the tip); shape (6,).
+    """Twist ``[v; omega] = J(q) @ qd`` of ``frame`` (default: the tip); shape (6,), or (k, 6)
+    for several frames (``frame`` and ``point`` as in :func:`~jaxkin.geometric_jacobian`: a list
+    or tuple of names and indices, one forward pass).
 
     ``qd`` has shape (nv,) (a velocity: for free, ball and planar joints the child frame's
     twist in its own axes, see :mod:`jaxkin.configuration`); batch ``q`` and ``qd`` together
@@ -73,25 +78,34 @@ def twist(
     ([-1.0, 1.0], 1.0)
     >>> bool(jnp.allclose(V, jk.geometric_jacobian(robot, q) @ qd))
     True
+    >>> jk.twist(robot, q, qd, frame=["link1", "link2"]).shape
+    (2, 6)
     """
     hint = "jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(qs, qds)"
     q = check_q(robot, q, fn="jk.twist", batch_hint=hint, host=True)
     qd = check_v(robot, qd, what="qd", fn="jk.twist", batch_hint=hint, host=True)
     check_reference(reference)
-    pt = check_point(point, result_dtype(robot, q), "jk.twist")
-    return eager(_twist, robot, (robot.frame_index(frame), reference), q, qd, pt)
+    dtype = result_dtype(robot, q)
+    frames = check_frames(robot, frame, "jk.twist")
+    if frames is None:
+        f, pt = robot.frame_index(frame), check_point(point, dtype, "jk.twist")
+    else:
+        f, pt = frames, check_points(point, len(frames), dtype, "jk.twist")
+    return _twist(robot, q, f, qd, pt, reference)
 
 
-def _twist(robot: Robot, f: int, reference: str, q, qd, pt) -> jax.Array:
-    g = jacobian_pass(robot, q, f, pt, reference)
+def _twist_kernel(robot: Robot, q, frame, qd, point, reference: str) -> jax.Array:
+    g = geometric_pass(robot, q, frame, point, reference)
     return g.times(qd.astype(g.dtype))
 
 
-def point_velocity(
-    robot: Robot, q: Any, qd: Any, point: Any, frame: int | str | None = None
-) -> jax.Array:
+_twist = eager(_twist_kernel, ("frame", "reference"))
+
+
+def point_velocity(robot: Robot, q: Any, qd: Any, point: Any, frame: Any = None) -> jax.Array:
     """Velocity (3,) in world axes of a point fixed to ``frame``, given as an offset (3,) from the
-    frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``.
+    frame origin in the frame's own axes: ``v_point = v + omega x (R @ point)``. For several
+    frames (``frame`` a list or tuple) the velocities (k, 3), ``point`` (3,) or (k, 3).
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("two_link_planar")
@@ -103,7 +117,7 @@ def point_velocity(
     hint = "jax.vmap(lambda q, qd: jk.point_velocity(robot, q, qd, point))(qs, qds)"
     q = check_q(robot, q, fn="jk.point_velocity", batch_hint=hint)
     qd = check_v(robot, qd, what="qd", fn="jk.point_velocity", batch_hint=hint)
-    return twist(robot, q, qd, frame=frame, point=point)[:3]
+    return twist(robot, q, qd, frame=frame, point=point)[..., :3]
 
 
 def velocity_results(

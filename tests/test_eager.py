@@ -26,6 +26,7 @@ CALLS = {
     "jacobian_rev": lambda r, q, qd: jk.jacobian_rev(r, q, reference="world"),
     "analytical_jacobian": lambda r, q, qd: jk.analytical_jacobian(r, q, "zyz"),
     "twist": lambda r, q, qd: jk.twist(r, q, qd),
+    "twist_of_frames": lambda r, q, qd: jk.twist(r, q, qd, frame=["link2", 6, "link2"]),
     "jacobian_dot": lambda r, q, qd: jk.jacobian_dot(r, q, qd),
     "jacobian_dot_qd": lambda r, q, qd: jk.jacobian_dot_qd(r, q, qd),
     "analytical_jacobian_dot": lambda r, q, qd: jk.analytical_jacobian_dot(r, q, qd),

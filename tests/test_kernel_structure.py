@@ -9,7 +9,7 @@ import pytest
 from _xla import FAST_COMPILE, hlo_counts, jaxpr_counts, jaxpr_eqns
 
 import jaxkin as jk
-from jaxkin import kinematics
+from jaxkin import _forward
 
 EPS32 = float(np.finfo(np.float32).eps)
 
@@ -43,8 +43,8 @@ def test_float32_compiled_panda_kernel_has_the_float64_structure():
 
 
 def test_snap_tolerance_by_dtype():
-    assert kinematics.snap_tolerance(np.float64) == kinematics.SNAP
-    tol32 = kinematics.snap_tolerance(np.float32)
+    assert _forward.snap_tolerance(np.float64) == _forward.SNAP
+    tol32 = _forward.snap_tolerance(np.float32)
     # cos and sin of float32-rounded right angles up to 2 pi fall inside; real small angles don't
     for angle in (np.pi / 2, np.pi, 3 * np.pi / 2, 2 * np.pi, -np.pi / 2):
         a = float(np.float32(angle))
@@ -117,7 +117,7 @@ def test_one_frame_of_a_tree_traces_only_its_ancestors(tree):
     _, robot = tree
     q = jnp.zeros(robot.dof)
     shallow = next(f for f in range(robot.n_frames) if 3 <= len(robot.ancestors(f)) < 6)
-    scanned = [kinematics.scan_joints(robot, f) is not None for f in (robot.n_frames - 1, shallow)]
+    scanned = [_forward.scan_joints(robot, f) is not None for f in (robot.n_frames - 1, shallow)]
     assert scanned == [True, False]  # both kinds of pass are exercised
     for frame in (robot.n_frames - 1, 60, shallow):
         path = robot.ancestors(frame)
@@ -129,7 +129,7 @@ def test_one_frame_of_a_tree_traces_only_its_ancestors(tree):
             (lambda q, f=frame: jk.jacobian_fwd(robot, q, frame=f), 450),  # tangents too
         ):
             eqns = jaxpr_eqns(fn, q)
-            if kinematics.scan_joints(robot, frame) is None:
+            if _forward.scan_joints(robot, frame) is None:
                 # unrolled: every sin and cos evaluates the path's revolute angles, nothing else
                 sizes = [e.invars[0].aval.size for e in eqns if e.primitive.name in ("sin", "cos")]
                 assert sizes and set(sizes) == {n_rev}, sizes

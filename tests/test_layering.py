@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin import _linalg, jacobians, kinematics, model
+from jaxkin import _forward, _jacobian_pass, _linalg, jacobians, kinematics, model, velocity
 
 SRC = Path(jk.__file__).parent
 
@@ -80,35 +80,126 @@ def test_ik_and_analysis_take_a_frame_pose_from_its_kernel():
 
 
 # --- item 5c: one argument order ----------------------------------------------------------------
-@pytest.mark.parametrize(
-    "kernel",
-    [
-        kinematics.frame_transform,
-        kinematics.frame_pose,
-        jacobians.jacobian_pass,
-        kinematics.forward_pass,
-        kinematics.scalar_pass,
-        kinematics.scan_pass,
-    ],
-)
-def test_kernels_take_robot_q_then_the_frame(kernel):
+KERNELS = [
+    _forward.frame_transform,
+    _forward.frame_transforms,
+    _forward.frame_pose,
+    _forward.frame_poses,
+    _forward.forward_pass,
+    _forward.scalar_pass,
+    _forward.scan_pass,
+    _forward.shared_scalar_pass,
+    _forward.all_frame_transforms,
+    _jacobian_pass.jacobian_pass,
+    _jacobian_pass.jacobians_pass,
+    _jacobian_pass.geometric_pass,
+    _jacobian_pass.autodiff_jacobian,
+    _jacobian_pass.analytical_jacobian_pass,
+]
+
+
+def _robot_q_frame_order(kernel) -> None:
     names = list(inspect.signature(kernel).parameters)
-    assert names[:2] == ["robot", "q"], names
-    assert not any(n in ("f", "frame") for n in names[3:]), names
+    assert names[0] == "robot" and names[1].startswith("q"), (kernel, names)
+    assert not any(n in ("f", "frame", "frames") for n in names[3:]), (kernel, names)
 
 
-def test_frame_transform_is_the_pose_of_frame_pose():
+@pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.__name__)
+def test_kernels_take_robot_q_then_the_frame(kernel):
+    _robot_q_frame_order(kernel)
+
+
+def _eager_wrappers() -> list:
+    """Every building block compiled through ``_jit.eager`` (module attributes carrying the
+    wrapped kernel), from every jaxkin module."""
+    import pkgutil
+    from importlib import import_module
+
+    found = []
+    for info in pkgutil.iter_modules([str(SRC)]):
+        mod = import_module(f"jaxkin.{info.name}")
+        found += [v for v in vars(mod).values() if callable(v) and hasattr(v, "static_argnames")]
+    return found
+
+
+def test_eager_kernels_take_robot_q_then_the_frame_too():
+    """The compiled building blocks keep the kernels' order: ``_jit.eager`` is told which
+    arguments are static by name, so no kernel puts its options before ``q``."""
+    wrappers = _eager_wrappers()
+    assert len(wrappers) >= 12, wrappers
+    for w in wrappers:
+        _robot_q_frame_order(w.kernel)
+        names = list(inspect.signature(w.kernel).parameters)
+        assert set(w.static_argnames) <= set(names), (w.kernel, w.static_argnames)
+
+
+def test_eager_keys_on_the_named_static_arguments():
+    from jaxkin import _jit
+
+    calls = []
+
+    def kernel(robot, q, frame, point, reference):
+        calls.append((frame, reference))
+        return q * frame + (0.0 if point is None else point.sum())
+
+    wrapped = _jit.eager(kernel, ("frame", "reference"))
     robot = jk.robots.load("two_link_planar")
-    q = jnp.array([0.3, -0.5])
-    f = robot.n_frames - 1
-    R, p = kinematics.frame_pose(robot, q, f)
-    T = kinematics.frame_transform(robot, q, f)
-    np.testing.assert_array_equal(T[:3, :3], R)
-    np.testing.assert_array_equal(T[:3, 3], p)
-    T_fk = jax.jit(lambda q: jk.fk(robot, q))(q)  # fk's kernel, traced inline
-    np.testing.assert_array_equal(
-        jax.jit(lambda q: kinematics.frame_transform(robot, q, f))(q), T_fk
-    )
+    _jit.eager_cache_clear()
+    try:
+        q = jnp.array([1.0, 2.0])
+        np.testing.assert_array_equal(wrapped(robot, q, 2, None, "local"), 2 * q)
+        np.testing.assert_array_equal(wrapped(robot, q + 1, 2, None, "local"), 2 * (q + 1))
+        np.testing.assert_array_equal(wrapped(robot, q, 3, jnp.ones(3), "local"), 3 * q + 3)
+        assert calls == [(2, "local"), (3, "local")]  # traced once per static value
+        assert _jit.eager_cache_info()["entries"] == 2
+        with pytest.raises(TypeError, match="takes 4 arguments after the robot"):
+            wrapped(robot, q, 2)
+    finally:
+        _jit.eager_cache_clear()
+
+
+# --- item 5e: kernels in a private layer ------------------------------------------------------
+PUBLIC_ALL = {
+    kinematics: {"fk", "fk_all", "uses_scan"},
+    jacobians: {
+        "REFERENCES",
+        "analytical_jacobian",
+        "change_reference",
+        "frame_jacobian",
+        "geometric_jacobian",
+        "jacobian_fwd",
+        "jacobian_rev",
+    },
+    velocity: {
+        "MOTION_KINDS",
+        "classify_motion",
+        "classify_twist",
+        "point_velocity",
+        "twist",
+        "velocity_results",
+    },
+}
+
+
+@pytest.mark.parametrize("module", list(PUBLIC_ALL), ids=lambda m: m.__name__)
+def test_public_modules_export_what_users_call(module):
+    assert set(module.__all__) == PUBLIC_ALL[module]
+
+
+def test_no_public_module_exports_a_kernel():
+    """The unchecked kernels live in ``_forward`` and ``_jacobian_pass`` (as optax keeps its
+    implementation under ``_src``): no public module lists one in ``__all__``, so the API pages
+    (autodoc follows ``__all__``) show what users call."""
+    import pkgutil
+    from importlib import import_module
+
+    kernels = set(_forward.__all__) | set(_jacobian_pass.__all__)
+    assert {k.__name__ for k in KERNELS} <= kernels
+    for info in pkgutil.walk_packages(jk.__path__, prefix="jaxkin."):
+        if any(part.startswith("_") for part in info.name.split(".")):
+            continue
+        exported = set(getattr(import_module(info.name), "__all__", ()))
+        assert not exported & kernels, (info.name, exported & kernels)
 
 
 # --- item 5d: model does not need build ---------------------------------------------------------

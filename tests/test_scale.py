@@ -14,7 +14,8 @@ import pytest
 
 import jaxkin as jk
 import jaxkin.testing as jkt
-from jaxkin import batch, kinematics
+from jaxkin import _forward as kinematics
+from jaxkin import batch
 
 
 def _chain(n, seed=0, convention="standard", prismatic=True):

@@ -1,0 +1,419 @@
+"""Private: the geometric Jacobian's kernels, unchecked (Table 4.1 from one forward pass).
+
+Kernels take ``(robot, q, frame, ...)``: a checked configuration ``q`` (``_checks.check_q``),
+frame indices, a checked ``point`` and ``reference`` (see :mod:`jaxkin.jacobians` for their
+meaning); nothing is checked again here, so solvers call them inside their loops.
+
+* :func:`jacobian_pass` ``(robot, q, frame, point, reference) -> FrameJacobian``: one frame;
+* :func:`jacobians_pass` ``(robot, q, frames, points=None, reference="world_aligned") ->
+  FrameJacobians``: several frames (a tuple of indices) from one shared forward pass;
+  ``.matrix()`` (k, 6, nv), ``.pose()`` (k, 4, 4), ``.times(qd)`` (k, 6), ``.rotation()``
+  (k, 3, 3); ``points`` None or (k, 3);
+* :func:`geometric_pass`: either, by the type of ``frame`` (an index or a tuple);
+* :func:`autodiff_jacobian`: the ``jax.jacfwd``/``jax.jacrev`` twins (one frame or several);
+* :func:`analytical_jacobian_pass`: ``d[p; phi]/dq`` and the representation margin.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _fold as fold
+from . import spatial
+from ._checks import is_traced, result_dtype
+from ._forward import (
+    frame_pose,
+    frame_poses,
+    scalar_pass,
+    scan_joints,
+    scan_pass,
+    shared_scalar_pass,
+)
+from .configuration import integrate_kernel
+from .model import Robot
+from .representations import from_matrix, representation_margin
+
+__all__ = [
+    "FrameJacobian",
+    "FrameJacobians",
+    "analytical_jacobian_pass",
+    "autodiff_jacobian",
+    "geometric_pass",
+    "jacobian_pass",
+    "jacobians_pass",
+]
+
+
+def _columns(robot: Robot, sp, target, frame: int) -> tuple[list, list]:
+    """Table 4.1 as scalars: per entry of ``v`` the linear and angular column at world point
+    ``target``.
+
+    A revolute joint i contributes ``[z_i x (target - o_i); z_i]``, a prismatic one ``[z_i; 0]``
+    (times its multiplier, summed over joints sharing a q entry); joints off the path give zeros.
+    A free joint gives six columns: with ``a_k`` the child frame's axes in world coordinates and
+    ``c`` its origin, ``[a_k; 0]`` (k = x, y, z) then ``[a_k x (target - c); a_k]``; a ball joint
+    the three angular ones, a planar joint the linear x, y and the angular z one.
+    """
+    zero = (0.0, 0.0, 0.0)
+    Jv = [zero] * robot.nv
+    Jw = [zero] * robot.nv
+    path = robot.ancestors(frame)
+    mult = _multipliers(robot, path)
+    for j in path:
+        kind = robot.kinds[j]
+        if kind == "fixed":
+            continue
+        if kind in ("free", "ball", "planar"):
+            _multi_dof_columns(kind, sp, j, robot.v_index[j], target, Jv, Jw)
+            continue
+        z = sp.z[j]
+        qi = robot.v_index[j]
+        if kind == "revolute":
+            jv, jw = fold.cross(z, fold.vsub(target, sp.o[j])), z
+        else:
+            jv, jw = z, zero
+        m = mult[j]
+        Jv[qi] = fold.vadd(Jv[qi], fold.vscale(jv, m))
+        Jw[qi] = fold.vadd(Jw[qi], fold.vscale(jw, m))
+    return Jv, Jw
+
+
+def _multi_dof_columns(kind: str, sp, j: int, vi: int, target, Jv: list, Jw: list) -> None:
+    """The columns of free, ball or planar joint ``j`` (its velocity in child axes)."""
+    zero = (0.0, 0.0, 0.0)
+    R, c = sp.R[j + 1], sp.p[j + 1]  # the child frame (placement robots: no A after the motion)
+    axes = [tuple(R[i][k] for i in range(3)) for k in range(3)]  # columns of R
+    arm = fold.vsub(target, c)
+    linear = {"free": (0, 1, 2), "ball": (), "planar": (0, 1)}[kind]
+    angular = {"free": (0, 1, 2), "ball": (0, 1, 2), "planar": (2,)}[kind]
+    col = vi
+    for k in linear:
+        Jv[col], Jw[col] = axes[k], zero
+        col += 1
+    for k in angular:
+        Jv[col], Jw[col] = fold.cross(axes[k], arm), axes[k]
+        col += 1
+
+
+def _multipliers(robot: Robot, joints) -> dict:
+    m = robot.multiplier
+    if is_traced(m):
+        return {j: m[j] for j in joints}
+    m = np.asarray(m, dtype=np.float64)
+    return {j: float(m[j]) for j in joints}
+
+
+ZERO_COLUMNS = 16
+
+
+def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
+    """(6, nv) array from per-column 3-vectors of scalars.
+
+    With at least ``ZERO_COLUMNS`` all-zero constant columns (joints off the frame's path in a
+    large tree) the other columns are scattered into a zeros block instead of stacking one
+    literal per entry (a concatenation of many pieces compiles slowly)."""
+    dof = len(Jv)
+
+    def block(cols):
+        rows = [[Jv[k][i] for k in cols] for i in range(3)]
+        rows += [[Jw[k][i] for k in cols] for i in range(3)]
+        return fold.stack_matrix(rows, dtype)
+
+    nonzero = [
+        k for k in range(dof) if not all(fold.is_const(x) and x == 0.0 for x in (*Jv[k], *Jw[k]))
+    ]
+    if dof - len(nonzero) < ZERO_COLUMNS:
+        return block(range(dof))
+    J = jnp.zeros((6, dof), dtype)
+    if not nonzero:
+        return J
+    return J.at[:, np.asarray(nonzero)].set(block(nonzero))
+
+
+class FrameJacobian(NamedTuple):
+    """The geometric Jacobian of one frame, before assembly: columns as scalar 3-vectors (short
+    robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's pose
+    (``R``, origin ``p``, world coordinates) from the same forward pass.
+
+    ``matrix()`` (6, dof), ``times(qd)`` = ``J @ qd`` (6,) without forming J, ``rotation()``
+    (3, 3), ``pose()`` (4, 4) ``T_world_frame``."""
+
+    Jv: Any
+    Jw: Any
+    R: Any
+    p: Any
+    dtype: Any
+
+    def matrix(self) -> jax.Array:
+        if isinstance(self.Jv, list):
+            return _assemble(self.Jv, self.Jw, self.dtype)
+        return jnp.concatenate([self.Jv, self.Jw], axis=0)
+
+    def times(self, qd: jax.Array) -> jax.Array:
+        """``J @ qd`` (6,) without materialising J when the columns are scalars."""
+        if not isinstance(self.Jv, list):
+            return self.matrix() @ qd
+        qs = [qd[k] for k in range(len(self.Jv))]
+        v = [
+            fold.add(*(fold.mul(c[i], s) for c, s in zip(self.Jv, qs, strict=True)))
+            for i in range(3)
+        ]
+        w = [
+            fold.add(*(fold.mul(c[i], s) for c, s in zip(self.Jw, qs, strict=True)))
+            for i in range(3)
+        ]
+        return fold.stack_matrix(v + w, self.dtype)
+
+    def rotation(self) -> jax.Array:
+        return fold.stack_matrix(self.R, self.dtype) if isinstance(self.R, tuple) else self.R
+
+    def pose(self) -> jax.Array:
+        """``T_world_frame`` (4, 4) of the frame (its origin, not ``point``)."""
+        p = fold.stack_matrix(self.p, self.dtype) if isinstance(self.p, tuple) else self.p
+        return spatial.make_transform(self.rotation(), p)
+
+
+def jacobian_pass(
+    robot: Robot, q: jax.Array, frame: int, point: jax.Array | None, reference: str
+) -> FrameJacobian:
+    """The kernel behind every geometric Jacobian: one forward pass, columns of frame index
+    ``frame`` at ``point`` (checked offset (3,) in the frame's axes, or None) in ``reference``.
+
+    ``q`` must be checked (``jk.geometric_jacobian`` and ``jk.jacobians.frame_jacobian`` are the
+    checked entry points); nothing is checked again here, so solvers call it inside their loops.
+    """
+    path = scan_joints(robot, frame)
+    if path is not None:
+        return _jacobian_pass_scan(robot, q, frame, path, point, reference)
+    sp = scalar_pass(robot, q, frames=(frame,))
+    return _unrolled_jacobian(robot, sp, frame, point, reference)
+
+
+def _unrolled_jacobian(robot: Robot, sp, frame: int, point, reference: str) -> FrameJacobian:
+    """Table 4.1 as scalars, from a :func:`~jaxkin._forward.scalar_pass` ``sp`` that reached
+    ``frame``."""
+    pt = None if point is None else point.astype(sp.dtype)
+    R, p = sp.R[frame], sp.p[frame]
+    target = p if pt is None else fold.vadd(p, fold.matvec(R, tuple(pt[i] for i in range(3))))
+    Jv, Jw = _columns(robot, sp, target, frame)
+    if reference == "local":
+        Rt = fold.transpose(R)
+        Jv = [fold.matvec(Rt, c) for c in Jv]
+        Jw = [fold.matvec(Rt, c) for c in Jw]
+    elif reference == "world":
+        # velocity of the point at the world origin: v_target - omega x target
+        Jv = [fold.vadd(v, fold.cross(target, w)) for v, w in zip(Jv, Jw, strict=True)]
+    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
+
+
+class FrameJacobians(NamedTuple):
+    """The geometric Jacobians of several frames from one forward pass: ``each`` holds one
+    :class:`FrameJacobian` per frame, in the order asked.
+
+    ``matrix()`` (k, 6, nv), ``times(qd)`` (k, 6) (``J_i @ qd`` without forming J),
+    ``rotation()`` (k, 3, 3), ``pose()`` (k, 4, 4) ``T_world_frame`` (origins, not points)."""
+
+    each: tuple
+
+    @property
+    def dtype(self) -> Any:
+        return self.each[0].dtype
+
+    def matrix(self) -> jax.Array:
+        return jnp.stack([g.matrix() for g in self.each])
+
+    def times(self, qd: jax.Array) -> jax.Array:
+        return jnp.stack([g.times(qd) for g in self.each])
+
+    def rotation(self) -> jax.Array:
+        return jnp.stack([g.rotation() for g in self.each])
+
+    def pose(self) -> jax.Array:
+        return jnp.stack([g.pose() for g in self.each])
+
+
+def jacobians_pass(
+    robot: Robot,
+    q: jax.Array,
+    frames: tuple[int, ...],
+    points: jax.Array | None = None,
+    reference: str = "world_aligned",
+) -> FrameJacobians:
+    """Several frames' Jacobians and poses from one forward pass: the kernel of
+    ``jk.geometric_jacobian(robot, q, frame=[...])``.
+
+    ``frames``: frame indices (a tuple, in any order, duplicates allowed); ``points``: None or
+    checked offsets (k, 3), row i in frame i's axes; ``reference`` as for :func:`jacobian_pass`.
+    One :func:`~jaxkin._forward.scalar_pass` over the union of the frames' paths
+    (:func:`~jaxkin._forward.shared_scalar_pass`): each joint on them is computed once, however
+    many frames it moves; a frame whose own path is scanned (a long serial path:
+    :func:`~jaxkin._forward.scan_joints`) gets its own scan. Entry i equals
+    ``jacobian_pass(robot, q, frames[i], points[i], reference)`` bit for bit. ``q`` must be
+    checked; nothing is checked here.
+    """
+    sp = shared_scalar_pass(robot, q, frames)
+    each = []
+    for i, f in enumerate(frames):
+        pt = None if points is None else points[i]
+        if scan_joints(robot, f) is not None:
+            each.append(jacobian_pass(robot, q, f, pt, reference))
+        else:
+            each.append(_unrolled_jacobian(robot, sp, f, pt, reference))
+    return FrameJacobians(each=tuple(each))
+
+
+def geometric_pass(
+    robot: Robot,
+    q: jax.Array,
+    frame: int | tuple[int, ...],
+    point: jax.Array | None,
+    reference: str,
+) -> FrameJacobian | FrameJacobians:
+    """:func:`jacobian_pass` for one frame index (``point`` None or (3,)), :func:`jacobians_pass`
+    for a tuple of them (``point`` None or (k, 3)): the kernel of the entry points that take one
+    frame or several."""
+    if isinstance(frame, tuple):
+        return jacobians_pass(robot, q, frame, point, reference)
+    return jacobian_pass(robot, q, frame, point, reference)
+
+
+def _jacobian_pass_scan(robot: Robot, q, frame: int, path, point, reference: str):
+    """Table 4.1 vectorised over the joints of a long path (see ``_forward.scan_pass``)."""
+    is_tool = robot.has_tool and frame == robot.n_joints + 1
+    fp = scan_pass(robot, q, path, tool=is_tool)
+    dtype = fp.p.dtype
+    R, p = fp.R[-1], fp.p[-1]
+    target = p if point is None else p + R @ point.astype(dtype)
+    path = np.asarray(path, dtype=np.int64)
+    kinds = np.array(robot.kinds, dtype=object)[path]
+    rev = jnp.asarray(kinds == "revolute", dtype=dtype)[:, None]
+    pri = jnp.asarray(kinds == "prismatic", dtype=dtype)[:, None]
+    m = robot.multiplier
+    mult = (m[path] if is_traced(m) else jnp.asarray(np.asarray(m)[path])).astype(dtype)[:, None]
+    cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (len, 3)
+    cols_w = mult * rev * fp.z
+    moving = kinds != "fixed"
+    vidx = np.array(robot.v_index, dtype=np.int64)[path][moving]  # 1-dof joints only here
+    Jv = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_v[moving]).T
+    Jw = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_w[moving]).T
+    if reference == "local":
+        Jv, Jw = R.T @ Jv, R.T @ Jw
+    elif reference == "world":
+        Jv = Jv + spatial.skew(target) @ Jw
+    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=dtype)
+
+
+def _pose_fn(robot: Robot, frame: int, point: jax.Array | None):
+    """Returns ``f(q) -> (p_point, R_frame)`` used by the autodiff Jacobians."""
+
+    def f(q):
+        R, p = frame_pose(robot, q, frame)
+        if point is not None:
+            p = p + R @ point.astype(p.dtype)
+        return p, R
+
+    return f
+
+
+def _poses_fn(robot: Robot, frames: tuple[int, ...], points: jax.Array | None):
+    """Returns ``f(q) -> (p_points (k, 3), R_frames (k, 3, 3))`` from one shared pass."""
+
+    def f(q):
+        R, p = frame_poses(robot, q, frames)
+        if points is not None:
+            p = p + jnp.einsum("kij,kj->ki", R, points.astype(p.dtype))
+        return p, R
+
+    return f
+
+
+def _jacobian_from_derivs(p, R, dp, dR, reference):
+    # dp: (3, dof), dR: (3, 3, dof). omega column k = vee(dR_k R^T).
+    Jw = jax.vmap(lambda dRk: spatial.vee(dRk @ R.T), in_axes=2, out_axes=1)(dR)
+    Jv = dp
+    if reference == "world_aligned":
+        return jnp.concatenate([Jv, Jw], axis=0)
+    if reference == "local":
+        return jnp.concatenate([R.T @ Jv, R.T @ Jw], axis=0)
+    return jnp.concatenate([Jv + spatial.skew(p) @ Jw, Jw], axis=0)
+
+
+def autodiff_jacobian(
+    robot: Robot,
+    q: jax.Array,
+    frame: int | tuple[int, ...],
+    point: jax.Array | None,
+    reference: str,
+    mode: str,
+) -> jax.Array:
+    """The geometric Jacobian by ``jax.jacfwd`` (``mode="fwd"``) or ``jax.jacrev`` (``"rev"``)
+    of forward kinematics: (6, nv) for one frame index (``point`` None or (3,)), (k, 6, nv) for a
+    tuple of them (``point`` None or (k, 3); one shared forward pass, differentiated once). For
+    a robot with ``nq != nv`` along ``integrate(robot, q, v)`` at ``v = 0``. Unchecked."""
+    several = isinstance(frame, tuple)
+    pose = _poses_fn(robot, frame, point) if several else _pose_fn(robot, frame, point)
+    jac = jax.jacfwd if mode == "fwd" else jax.jacrev
+    q = q.astype(result_dtype(robot, q))
+    if robot.nq == robot.nv:
+        dp, dR = jac(pose)(q)
+    else:  # differentiate along the configuration manifold: v -> pose(integrate(q, v)) at 0
+        v0 = jnp.zeros(robot.nv, q.dtype)
+        dp, dR = jac(lambda v: pose(integrate_kernel(robot, q, v)))(v0)
+    p, R = pose(q.astype(dp.dtype))
+    if several:
+        return jax.vmap(lambda *a: _jacobian_from_derivs(*a, reference))(p, R, dp, dR)
+    return _jacobian_from_derivs(p, R, dp, dR, reference)
+
+
+def analytical_jacobian_pass(
+    robot: Robot,
+    q: jax.Array,
+    frame: int,
+    point: jax.Array | None,
+    representation: str,
+    method: str = "chain",
+) -> tuple[jax.Array, jax.Array]:
+    """The kernel of ``jk.analytical_jacobian`` on checked arguments: ``(J_a (6, nv), margin)``,
+    unmasked (see :func:`jacobian_pass` for the arguments)."""
+    pt = point
+    dtype = result_dtype(robot, q)
+    to_phi = lambda R: from_matrix(R, representation)  # noqa: E731
+
+    if method == "chain":
+        g = jacobian_pass(robot, q, frame, pt, "world_aligned")
+        J = g.matrix()
+        R = g.rotation()
+        phi = to_phi(R)
+        dphi_dR = jax.jacfwd(to_phi)(R)  # (3, 3, 3): d phi_i / d R_ab
+        # dR/dq_k = skew(w_k) R, elementwise (no small batched dots):
+        w = J[3:]  # (3, dof)
+        S = jnp.stack(
+            [
+                jnp.stack([jnp.zeros_like(w[0]), -w[2], w[1]]),
+                jnp.stack([w[2], jnp.zeros_like(w[0]), -w[0]]),
+                jnp.stack([-w[1], w[0], jnp.zeros_like(w[0])]),
+            ]
+        )  # (3, 3, dof): S[a, c, k] = skew(w_k)[a, c]
+        dR = jnp.sum(S[:, :, None, :] * R[None, :, :, None], axis=1)  # (3, 3, dof)
+        dphi = jnp.sum(dphi_dR[:, :, :, None] * dR[None], axis=(1, 2))  # (3, dof)
+        Ja = jnp.concatenate([J[:3], dphi], axis=0)
+    else:
+        pose = _pose_fn(robot, frame, pt)
+
+        def x_of_q(qq):
+            p, R = pose(qq)
+            phi = to_phi(R)
+            return jnp.concatenate([p, phi]), phi
+
+        if robot.nq == robot.nv:
+            Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(q.astype(dtype))
+        else:
+            qq = q.astype(dtype)
+            Ja, phi = jax.jacfwd(lambda v: x_of_q(integrate_kernel(robot, qq, v)), has_aux=True)(
+                jnp.zeros(robot.nv, dtype)
+            )
+    return Ja, representation_margin(phi, representation)

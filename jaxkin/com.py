@@ -1,0 +1,229 @@
+"""Mass and centre of mass: :func:`center_of_mass` and :func:`com_jacobian`.
+
+A robot loaded from a description with inertial data (URDF ``<inertial>``, MuJoCo's compiled
+body masses, ``inertial=`` joint specs of :func:`jaxkin.build.from_joints`) holds one mass,
+centre of mass and rotational inertia per frame (``robot.frame_mass``, ``frame_com``,
+``frame_inertia``; ``robot.has_inertia``); ``robot.mass`` is the total. The centre of mass is
+
+    c(q) = sum_i m_i c_i(q) / sum_i m_i,   c_i = p_i + R_i com_i,
+
+over every frame ``i``, those fixed to the base included (they do not move: a constant in ``c``,
+nothing in its Jacobian), in world coordinates (the frame ``robot.base`` is expressed in), as
+MuJoCo's ``subtree_com`` of the world body. Pinocchio's ``centerOfMass`` of a fixed-base model
+leaves out the links fixed to its universe (``computeTotalMass`` does not count them either);
+for a free-flyer model (``floating_base=True``) the two agree.
+
+:func:`com_jacobian` is ``dc/dv`` (3, nv): ``dc = Jc v dt`` for a velocity ``v``, its columns in
+jaxkin's velocity convention (``robot.velocity_names``; a free joint's linear velocity in its
+child's axes, as Pinocchio's ``jacobianCenterOfMass``). One forward pass gives both: each
+joint's column is that of the centre of mass of the subtree it moves, weighted by the subtree's
+share of the mass (``z x (S - M o)`` for a revolute joint, ``S`` the mass-weighted sum of the
+subtree's centres, ``M`` its mass, ``o`` a point on the axis).
+
+Kernels for other solvers (unchecked, traced into the caller's computation):
+:func:`com_and_jacobian` ``(robot, q) -> (c, Jc)`` and :func:`com_kernel` ``(robot, q) -> c``;
+call :func:`check_inertia` once, eagerly, in the checked entry point that uses them.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_q
+from ._forward import forward_pass
+from ._jit import eager
+from ._traces import is_traced
+from .errors import ModelError
+from .model import Robot
+
+__all__ = ["center_of_mass", "com_jacobian"]  # kernels for solvers: com_and_jacobian, com_kernel
+
+
+def center_of_mass(robot: Robot, q: Any) -> jax.Array:
+    """The robot's centre of mass in world coordinates, shape (3,) (see the module doc).
+
+    Raises :class:`~jaxkin.ModelError` for a robot without inertial data (a DH robot, a URDF
+    without ``<inertial>``) and, called eagerly, for a total mass of 0 (under ``jit`` over the
+    robot the result is then NaN). ``jit``, ``vmap`` (over ``q`` or a stack of robots) and
+    ``grad`` (over ``q`` and the robot's leaves, masses included) work.
+
+    >>> import jaxkin as jk
+    >>> robot = jk.Robot.from_joints(
+    ...     [
+    ...         dict(name="j1", type="revolute", child="a", axis=[0, 0, 1],
+    ...              inertial=dict(mass=1.0, xyz=[1, 0, 0])),
+    ...         dict(name="j2", type="fixed", child="b", xyz=[2, 0, 0],
+    ...              inertial=dict(mass=3.0)),
+    ...     ]
+    ... )
+    >>> float(robot.mass), jk.center_of_mass(robot, [0.0]).tolist()  # (1 * 1 + 3 * 2) / 4
+    (4.0, [1.75, 0.0, 0.0])
+    """
+    fn = "jk.center_of_mass"
+    q = check_q(robot, q, fn=fn, host=True)
+    check_inertia(robot, fn)
+    return _center_of_mass(robot, q)
+
+
+def com_jacobian(robot: Robot, q: Any) -> jax.Array:
+    """The Jacobian of :func:`center_of_mass`, shape (3, nv): ``dc = Jc v`` (see the module doc
+    for the columns; Pinocchio's ``jacobianCenterOfMass``). Errors and transformations as
+    :func:`center_of_mass`.
+
+    >>> import jaxkin as jk
+    >>> robot = jk.Robot.from_joints(
+    ...     [dict(name="j1", type="revolute", child="a", axis=[0, 0, 1],
+    ...           inertial=dict(mass=2.0, xyz=[1, 0, 0]))]
+    ... )
+    >>> jk.com_jacobian(robot, [0.0]).tolist()  # turning about z moves the mass along y
+    [[0.0], [1.0], [0.0]]
+    """
+    fn = "jk.com_jacobian"
+    q = check_q(robot, q, fn=fn, host=True)
+    check_inertia(robot, fn)
+    return _com_jacobian(robot, q)
+
+
+def check_inertia(robot: Robot, fn: str) -> None:
+    """Raise :class:`~jaxkin.ModelError` unless ``robot`` has inertial data and (when its leaves
+    are concrete) a positive total mass: the check of every entry point that uses the centre of
+    mass, done once, eagerly."""
+    if not robot.has_inertia:
+        raise _no_inertia(robot, fn)
+    if not is_traced(robot.frame_mass) and robot.frame_mass.ndim == 1:
+        total = float(np.sum(np.asarray(robot.frame_mass, dtype=np.float64)))
+        if not total > 0.0:
+            raise ModelError(
+                f"{fn}: robot {robot.name!r} has total mass {total!r} kg (robot.mass), so its "
+                "centre of mass is undefined. Give its links positive masses (URDF "
+                '<inertial><mass value="..."/>, MJCF <inertial mass=...> or geoms, '
+                "from_joints inertial=dict(mass=...)), or robot.replace(frame_mass=...)."
+            )
+
+
+def _no_inertia(robot: Robot, fn: str) -> ModelError:
+    if robot.parameterisation != "placement":
+        why = "a Denavit-Hartenberg table has no masses"
+    else:
+        why = (
+            "its description gave none (a URDF whose links have no <inertial>, joint specs "
+            "without inertial=, or an MJCF model whose masses MuJoCo infers from mesh geoms, "
+            "which jaxkin does not read)"
+        )
+    return ModelError(
+        f"{fn}: robot {robot.name!r} has no inertial data (masses), so it has no centre of "
+        f"mass: {why}. Load a description with masses (a URDF with <inertial> in its links, an "
+        "MJCF model with <inertial> or primitive geoms; from_joints specs with inertial=...), "
+        "or give them: robot.replace(frame_mass=..., frame_com=..., frame_inertia=..., "
+        "has_inertia=True) (shapes (n_frames,), (n_frames, 3), (n_frames, 3, 3))."
+    )
+
+
+# ----------------------------------------------------------------------------- kernels
+def com_kernel(robot: Robot, q: jax.Array) -> jax.Array:
+    """The centre of mass (3,) of a checked ``q``; nothing is checked but ``robot.has_inertia``
+    (static). NaN for a total mass of 0."""
+    if not robot.has_inertia:
+        raise _no_inertia(robot, "com_kernel")
+    fp = forward_pass(robot, q)
+    m, c = _frame_centres(robot, fp)
+    return jnp.sum(m[:, None] * c, axis=0) / jnp.sum(m)
+
+
+def com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``(c, Jc)``: the centre of mass (3,) and its Jacobian (3, nv) of a checked ``q``, from
+    one forward pass; nothing is checked but ``robot.has_inertia`` (static), so solvers call it
+    inside their loops (after :func:`check_inertia`). NaN for a total mass of 0."""
+    if not robot.has_inertia:
+        raise _no_inertia(robot, "com_and_jacobian")
+    fp = forward_pass(robot, q)
+    dtype = fp.p.dtype
+    m, c = _frame_centres(robot, fp)
+    M = _subtree_sums(robot, m[:, None])[:, 0]  # per frame: the mass of its subtree
+    S = _subtree_sums(robot, m[:, None] * c)  # and the mass-weighted sum of its centres
+    total = M[0]
+    Jc = jnp.zeros((robot.nv, 3), dtype=dtype)
+    single = [j for j, k in enumerate(robot.kinds) if k in ("revolute", "prismatic")]
+    if single:
+        idx = np.asarray(single, dtype=np.int64)
+        kinds = np.array(robot.kinds, dtype=object)[idx]
+        rev = jnp.asarray(kinds == "revolute", dtype=dtype)[:, None]
+        pri = 1.0 - rev
+        mult = jnp.asarray(robot.multiplier)[idx].astype(dtype)[:, None]
+        z, o, Mj, Sj = fp.z[idx], fp.o[idx], M[idx + 1][:, None], S[idx + 1]
+        cols = mult * (rev * jnp.cross(z, Sj - Mj * o) + pri * Mj * z)
+        Jc = Jc.at[np.asarray(robot.v_index, dtype=np.int64)[idx]].add(cols)
+    for j in robot.multi_dof_joints:
+        Jc = _multi_dof_columns(robot, fp, j, M[j + 1], S[j + 1], Jc)
+    return S[0] / total, Jc.T / total
+
+
+def _frame_centres(robot: Robot, fp) -> tuple[jax.Array, jax.Array]:
+    """Per frame: the mass (n_frames,) and the centre of mass in world coordinates (n_frames,
+    3)."""
+    dtype = fp.p.dtype
+    m = jnp.asarray(robot.frame_mass).astype(dtype)
+    com = jnp.asarray(robot.frame_com).astype(dtype)
+    return m, fp.p + jnp.einsum("fij,fj->fi", fp.R, com)
+
+
+def _multi_dof_columns(robot: Robot, fp, j: int, M, S, Jc: jax.Array) -> jax.Array:
+    """The columns of free, ball or planar joint ``j`` (velocity in its child's axes, as
+    :mod:`jaxkin.jacobians`), times the mass ``M`` its subtree holds (``S``: the subtree's
+    mass-weighted centres)."""
+    kind, vi = robot.kinds[j], robot.v_index[j]
+    R, c = fp.R[j + 1], fp.p[j + 1]
+    axes = R.T  # rows: the child's axes in world coordinates
+    angular = jnp.cross(axes, S - M * c)  # rows: a_k x (S - M c)
+    if kind == "free":
+        cols = jnp.concatenate([M * axes, angular])
+    elif kind == "ball":
+        cols = angular
+    else:  # planar: vx, vy, wz
+        cols = jnp.concatenate([M * axes[:2], angular[2:]])
+    return Jc.at[vi : vi + cols.shape[0]].add(cols)
+
+
+def _subtree_sums(robot: Robot, x: jax.Array) -> jax.Array:
+    """Per frame, the sum of ``x`` (n_frames, k) over the frame's subtree (itself included):
+    a reverse cumulative sum for a serial chain, else one scatter-add per depth level of the
+    tree, deepest first."""
+    levels = _levels(robot.parents, robot.has_tool)
+    if levels is None:
+        return jnp.cumsum(x[::-1], axis=0)[::-1]
+    for kids, parents in levels:
+        x = x.at[parents].add(x[kids])
+    return x
+
+
+@functools.lru_cache(maxsize=256)
+def _levels(parents: tuple[int, ...], has_tool: bool):
+    """The frames of each depth of the tree with their parent frames, deepest first, as index
+    arrays; None for a serial chain (each frame's parent is the previous frame)."""
+    n = len(parents)
+    parent = [-1, *parents, *([n] if has_tool else [])]
+    if all(p == f - 1 for f, p in enumerate(parent)):
+        return None
+    depth = [0] * len(parent)
+    for f in range(1, len(parent)):  # parents come before children
+        depth[f] = depth[parent[f]] + 1
+    by_depth: dict[int, list[int]] = {}
+    for f in range(1, len(parent)):
+        by_depth.setdefault(depth[f], []).append(f)
+    return tuple(
+        (np.asarray(fs, dtype=np.int64), np.asarray([parent[f] for f in fs], dtype=np.int64))
+        for d, fs in sorted(by_depth.items(), reverse=True)
+    )
+
+
+def _jacobian_kernel(robot: Robot, q: jax.Array) -> jax.Array:
+    return com_and_jacobian(robot, q)[1]
+
+
+_center_of_mass = eager(com_kernel)
+_com_jacobian = eager(_jacobian_kernel)
