@@ -424,9 +424,11 @@ class Robot:
 
     @property
     def mass(self) -> jax.Array:
-        """The total mass in kg: the sum of ``frame_mass`` (every frame, those fixed to the base
-        included; 0 for a robot without inertial data, see ``has_inertia``). A JAX scalar (one
-        per robot of a stack), traced inside ``jit``/``grad`` over the robot."""
+        """The total mass in kg, the sum of ``frame_mass`` over every frame (those fixed to the
+        base included; 0 for a robot without inertial data, see ``has_inertia``).
+
+        A JAX scalar (one per robot of a stack), traced inside ``jit``/``grad`` over the robot.
+        """
         return jnp.sum(self.frame_mass, axis=-1)
 
     @property
