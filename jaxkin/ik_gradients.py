@@ -31,6 +31,14 @@ Singular or unconverged solutions give finite damped values, never NaN. Check th
 derivative is only that of a best effort) and ``singular`` (``s_min^2 <= eps |J_f|_F^2`` among
 the free columns: the true derivative is unbounded there and the damped one is a choice).
 
+Whole-body solves (several frames, weights, a centre-of-mass target, free and ball joints: see
+:mod:`jaxkin.ik`) use the same rule on the stacked, weighted residual and Jacobian (rows of weight
+0 are zero rows; columns: the velocity ``v``, nv of them): ``dv = J_f^+ b`` as above, then
+``dq = d/ds integrate(q, s dv)`` at ``s = 0`` (nq,): a quaternion's tangent is
+``0.5 quat * (0, omega)``, so ``q + t dq`` stays unit to first order. The posture term is not
+part of the residual the solution zeroes and does not enter the derivative. ``full_rank`` then
+counts only the rows whose weight is not 0 (``rows=``).
+
 Calibration through IK: fit a tool offset ``p`` so that the IK solutions of known poses ``Ts``
 (N, 4, 4) match the joint angles measured there, ``q_measured`` (N, dof); each solve starts at
 the measured angles (they pick the branch)::
@@ -75,12 +83,14 @@ def _pivots_positive(A: jax.Array) -> jax.Array:
     return unrolled_cholesky(lambda i, k: A[i, k], A.shape[0], floor)[1]
 
 
-def full_rank(J: jax.Array, held: jax.Array) -> jax.Array:
-    """True when ``J`` (6, dof) restricted to the free columns (``~held``) has full rank to
-    working precision: ``s_min^2 > eps |J_f|_F^2`` over its ``min(6, n_free)`` singular values.
+def full_rank(J: jax.Array, held: jax.Array, rows: jax.Array | None = None) -> jax.Array:
+    """True when ``J`` (m, dof) restricted to the free columns (``~held``) has full rank to
+    working precision: ``s_min^2 > eps |J_f|_F^2`` over its ``min(m, n_free)`` singular values.
 
-    Decided exactly by a Cholesky factorisation of the Gram matrix shifted by that threshold
-    (positive definite iff every eigenvalue exceeds it), not an SVD.
+    For ``m <= 6`` decided exactly by a Cholesky factorisation of the Gram matrix shifted by that
+    threshold (positive definite iff every eigenvalue exceeds it), not an SVD; larger (stacked,
+    whole-body) Jacobians by their singular values. ``rows`` (m,) bool: the rows that count
+    (a row with weight zero is not a target: it is left out of ``m``); default all.
 
     >>> import jax.numpy as jnp
     >>> J = jnp.eye(6, 7)
@@ -89,9 +99,17 @@ def full_rank(J: jax.Array, held: jax.Array) -> jax.Array:
     """
     dtype = J.dtype
     Jf = jnp.where(held[None, :], 0.0, J)
+    if rows is not None:
+        Jf = jnp.where(rows[:, None], Jf, 0.0)
     fro2 = jnp.sum(Jf * Jf)
     tau = jnp.finfo(dtype).eps * fro2
     n = J.shape[1]
+    if rows is not None or J.shape[0] > 6:
+        s = jnp.linalg.svd(Jf, compute_uv=False)  # descending; zero rows give zeros
+        m = J.shape[0] if rows is None else jnp.sum(rows)
+        r = jnp.minimum(m, jnp.sum(~held))
+        ok = (r >= 1) & (s[jnp.maximum(r - 1, 0)] ** 2 > tau) if n >= 1 else False
+        return ok & (fro2 > 0) & jnp.all(jnp.isfinite(J))
     wide = jnp.sum(~held) >= J.shape[0]  # the 6 x 6 Gram J_f J_f^T decides
     G = Jf @ Jf.T - tau * jnp.eye(J.shape[0], dtype=dtype)
     # Otherwise the Gram of the free columns; held ones get a diagonal that cannot fail.

@@ -1,0 +1,289 @@
+"""Whole-body inverse kinematics (issue 23 item 3): ``jk.solve_ik`` on floating-base and ball-joint
+robots, several frames at once, weights, posture, the centre of mass.
+
+Oracles: ``jk.fk`` (the forward kinematics, not the solver's Jacobian pass) at the returned
+configuration; unit quaternions; ``jk.difference`` for the posture; for the implicit-function
+derivative, that the frames follow the target's tangent (``d fk(q*(T)) = dT``).
+
+Compiles: one Solo12 solve (four feet, a batch of 50, module fixture) and a few solves of
+``LEGS``, a small free-floating robot with ball hips (one compile per task shape).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _xla import FAST_COMPILE
+
+import jaxkin as jk
+from jaxkin.ik import RESULTS
+
+LEGS = jk.Robot.from_joints(
+    [
+        dict(name="root", type="free", child="pelvis", inertial=dict(mass=10.0, xyz=[0, 0, 0.1])),
+        dict(
+            name="l_hip",
+            type="ball",
+            parent="pelvis",
+            child="l_thigh",
+            xyz=[0, 0.1, 0],
+            inertial=dict(mass=3.0, xyz=[0, 0, -0.2]),
+        ),
+        dict(
+            name="l_knee",
+            type="revolute",
+            child="l_shin",
+            xyz=[0, 0, -0.4],
+            axis=[0, 1, 0],
+            lower=0.0,
+            upper=2.5,
+            inertial=dict(mass=2.0, xyz=[0, 0, -0.2]),
+        ),
+        dict(name="l_foot", type="fixed", child="l_foot", xyz=[0.05, 0, -0.4]),
+        dict(
+            name="r_hip",
+            type="ball",
+            parent="pelvis",
+            child="r_thigh",
+            xyz=[0, -0.1, 0],
+            inertial=dict(mass=3.0, xyz=[0, 0, -0.2]),
+        ),
+        dict(
+            name="r_knee",
+            type="revolute",
+            child="r_shin",
+            xyz=[0, 0, -0.4],
+            axis=[0, 1, 0],
+            lower=0.0,
+            upper=2.5,
+            inertial=dict(mass=2.0, xyz=[0, 0, -0.2]),
+        ),
+        dict(name="r_foot", type="fixed", child="r_foot", xyz=[0.05, 0, -0.4]),
+    ],
+    name="legs",
+    dtype=np.float64,
+)
+FEET = ["l_foot", "r_foot"]
+
+
+def quaternion_norms(robot: jk.Robot, qs) -> np.ndarray:
+    """|quaternion| of every free and ball joint, (N, n_joints)."""
+    qs = np.atleast_2d(np.asarray(qs))
+    out = []
+    for j in robot.multi_dof_joints:
+        qi = robot.q_index[j]
+        s = slice(qi + 3, qi + 7) if robot.kinds[j] == "free" else slice(qi, qi + 4)
+        out.append(np.linalg.norm(qs[:, s], axis=-1))
+    return np.stack(out, axis=-1)
+
+
+def fk_frames(robot, qs, frames):
+    return np.asarray(jax.vmap(lambda q: jk.fk(robot, q, frame=frames))(jnp.asarray(qs)))
+
+
+def targets(robot, n, key, frames):
+    qs = jk.sample_configurations(robot, n, key=key)
+    return fk_frames(robot, qs, frames)
+
+
+# ----------------------------------------------------------------------------- Solo12
+@functools.cache
+def solo_case():
+    robot = jk.robots.load("erd/solo12", floating_base=True, dtype=np.float64)
+    feet = list(robot.default_frames)
+    T = targets(robot, 50, 11, feet)
+    sol = jk.solve_ik(robot, T, jk.neutral(robot), frame=feet, throw=False)
+    return robot, feet, T, sol
+
+
+def test_solo12_four_feet_all_converge_from_neutral_with_defaults():
+    robot, feet, T, sol = solo_case()
+    assert sol.q.shape == (50, robot.nq) and sol.position_error.shape == (50, 4)
+    assert np.all(sol.converged), np.asarray(sol.result)
+    assert np.all(sol.result == RESULTS.converged)
+    # the forward kinematics at the answer (not the solver's own pass) puts every foot there
+    Tq = fk_frames(robot, sol.q, feet)
+    assert np.max(np.abs(Tq[..., :3, 3] - T[..., :3, 3])) < 1e-9
+    assert np.max(np.abs(Tq[..., :3, :3] - T[..., :3, :3])) < 1e-9
+    assert np.all(sol.residual <= 1e-10)
+    np.testing.assert_allclose(quaternion_norms(robot, sol.q), 1.0, atol=1e-14)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    assert np.all((np.asarray(sol.q) >= lo) & (np.asarray(sol.q) <= hi))
+
+
+def test_solo12_errors_per_foot():
+    sol = solo_case()[-1]
+    assert np.all(sol.position_error < 1e-10) and np.all(sol.orientation_error < 1e-10)
+    assert sol.com_error is None and not np.any(sol.singular)
+
+
+def test_throw_raises_with_every_solution_kept():
+    """The same call as the fixture's (one compile), with one foot 5 m from the others."""
+    robot, feet, T, _ = solo_case()
+    far = T.copy()
+    far[0, 1, :3, 3] += [0.0, -5.0, 0.0]
+    with pytest.raises(jk.IKError, match=r"1 of 50 target\(s\) not reached") as info:
+        jk.solve_ik(robot, far, jk.neutral(robot), frame=feet)
+    sol = info.value.solution
+    assert not sol.converged[0] and np.all(sol.converged[1:])
+    assert sol.result[0] in (RESULTS.stalled, RESULTS.max_steps_reached)
+
+
+# ----------------------------------------------------------------------------- LEGS
+N = 12
+
+
+@functools.cache
+def legs_case():
+    """A batch of two-feet targets of LEGS (the feet and the centre of mass of random
+    configurations) and a posture."""
+    qs = jk.sample_configurations(LEGS, N, key=3)
+    T = fk_frames(LEGS, qs, FEET)
+    com = np.asarray(jax.vmap(lambda q: jk.center_of_mass(LEGS, q))(qs))
+    q_ref = np.asarray(jk.sample_configurations(LEGS, 1, key=9))[0]
+    return T, com, q_ref
+
+
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+def _solve_legs(T, com, q_ref, weights, com_weight, posture_weight):
+    return jk.solve_ik(
+        LEGS,
+        T,
+        jk.neutral(LEGS),
+        frame=FEET,
+        weights=weights,
+        com=com,
+        com_weight=com_weight,
+        posture=q_ref,
+        posture_weight=posture_weight,
+        throw=False,
+    )
+
+
+def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0):
+    """Every LEGS batch solve: the centre-of-mass target and the posture term are always there,
+    with weight 0 unless asked for (the weights are data: one compile serves them all)."""
+    _, com, q_ref = legs_case()
+    return _solve_legs(T, com, q_ref, np.broadcast_to(weights, (2, 6)), com_weight, posture_weight)
+
+
+def test_ball_joints_and_a_floating_base_converge_with_unit_quaternions():
+    T = legs_case()[0]
+    sol = solve_legs(T)
+    assert np.all(sol.converged)
+    assert sol.q.shape == (N, LEGS.nq) and sol.position_error.shape == (N, 2)
+    Tq = fk_frames(LEGS, sol.q, FEET)
+    np.testing.assert_allclose(Tq, T, atol=1e-9)
+    np.testing.assert_allclose(quaternion_norms(LEGS, sol.q), 1.0, atol=1e-14)
+    knees = np.asarray(sol.q)[:, [11, 16]]
+    assert np.all((knees >= 0.0) & (knees <= 2.5))
+
+
+def test_position_only_and_orientation_only_rows():
+    T = legs_case()[0]
+    position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
+    sol = solve_legs(T, weights=position)
+    assert np.all(sol.converged)
+    Tq = fk_frames(LEGS, sol.q, FEET)
+    np.testing.assert_allclose(Tq[..., :3, 3], T[..., :3, 3], atol=1e-9)
+    assert np.all(sol.orientation_error == 0.0)  # rows with weight 0 are no target
+    # left foot: orientation only; right foot: its pose, position rows weighted 10
+    mixed = np.array([[0.0, 0, 0, 1, 1, 1], [10.0, 10, 10, 1, 1, 1]])
+    sol = solve_legs(T, weights=mixed)
+    assert np.all(sol.converged)
+    Tq = fk_frames(LEGS, sol.q, FEET)
+    np.testing.assert_allclose(Tq[:, 0, :3, :3], T[:, 0, :3, :3], atol=1e-9)
+    np.testing.assert_allclose(Tq[:, 1], T[:, 1], atol=1e-10)
+    assert np.all(sol.position_error[:, 0] == 0.0)
+
+
+def test_posture_pulls_toward_the_reference_without_stopping_the_targets():
+    T, _, q_ref = legs_case()
+    position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
+    free = solve_legs(T, weights=position)
+    pulled = solve_legs(T, weights=position, posture_weight=1.0)
+    assert np.all(free.converged) and np.all(pulled.converged)
+    np.testing.assert_allclose(
+        fk_frames(LEGS, pulled.q, FEET)[..., :3, 3], T[..., :3, 3], atol=1e-9
+    )
+
+    def gap(qs):  # the joints' distance to the posture (the base is not pulled)
+        d = jax.vmap(lambda q: jk.difference(LEGS, q, q_ref))(jnp.asarray(qs))
+        return np.linalg.norm(np.asarray(d)[:, 6:], axis=1)
+
+    assert np.mean(gap(pulled.q)) < 0.7 * np.mean(gap(free.q))
+
+
+def test_centre_of_mass_target_with_the_feet_positions():
+    T, com, _ = legs_case()
+    position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
+    sol = solve_legs(T, weights=position, com_weight=1.0)
+    assert np.all(sol.converged) and sol.com_error.shape == (N,)
+    assert np.all(sol.com_error < 1e-10)
+    c = np.asarray(jax.vmap(lambda q: jk.center_of_mass(LEGS, q))(sol.q))
+    np.testing.assert_allclose(c, com, atol=1e-10)
+    np.testing.assert_allclose(fk_frames(LEGS, sol.q, FEET)[..., :3, 3], T[..., :3, 3], atol=1e-9)
+
+
+def test_refusals_name_the_argument():
+    T = legs_case()[0]
+    q0 = jk.neutral(LEGS)
+    with pytest.raises(jk.ShapeError, match=r"T_target must have shape \(2, 4, 4\)"):
+        jk.solve_ik(LEGS, T[0, 0], q0, frame=FEET)
+    with pytest.raises(jk.ShapeError, match=r"weights must have shape \(6,\) or \(2, 6\)"):
+        jk.solve_ik(LEGS, T[0], q0, frame=FEET, weights=np.ones(2))
+    with pytest.raises(jk.JaxkinError, match=r"weights must be >= 0"):
+        jk.solve_ik(LEGS, T[0], q0, frame=FEET, weights=-np.ones(6))
+    with pytest.raises(jk.JaxkinError, match=r"method='lm' only"):
+        jk.solve_ik(LEGS, T[0], q0, frame=FEET, method="optax")
+    with pytest.raises(jk.ShapeError, match=r"posture must have shape \(17,\)"):
+        jk.solve_ik(LEGS, T[0], q0, frame=FEET, posture=np.zeros(14))
+    with pytest.raises(jk.ShapeError, match=r"com must have shape \(3,\) or \(12, 3\)"):
+        jk.solve_ik(LEGS, T, q0, frame=FEET, com=np.zeros((2, 3)))
+    with pytest.raises(jk.ModelError, match=r"no inertial data"):
+        jk.solve_ik(jk.robots.load("ur5"), np.eye(4), np.zeros(6), com=np.zeros(3))
+
+
+# ----------------------------------------------------------------------------- float32, one frame
+def test_float32_single_frame_of_a_floating_robot():
+    robot = LEGS.astype(np.float32)
+    q = np.asarray(jk.sample_configurations(robot, 1, key=5))[0]
+    T = np.asarray(jk.fk(robot, q, frame="l_foot"))
+    solve = jax.jit(
+        lambda T: jk.solve_ik(robot, T, jk.neutral(robot), frame="l_foot", throw=False),
+        compiler_options=FAST_COMPILE,
+    )
+    sol = solve(T)
+    assert sol.converged and sol.q.dtype == np.float32 and sol.position_error.shape == ()
+    assert sol.residual <= 1e-5
+    Tq = np.asarray(jk.fk(robot, sol.q, frame="l_foot"))
+    np.testing.assert_allclose(Tq, T, atol=2e-5)
+    np.testing.assert_allclose(quaternion_norms(robot, sol.q), 1.0, atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- derivatives
+def test_implicit_derivative_moves_the_frames_with_their_targets():
+    """``d fk(q*(T)) / dT = dT``: the tangent of the solution moves both feet exactly as their
+    targets move (12 rows, 14 velocity columns: full row rank)."""
+    T = legs_case()[0]
+    T = T[0]
+    rng = np.random.default_rng(0)
+    xi = rng.normal(size=(2, 6))
+    hat = np.zeros((2, 4, 4))
+    for i, (x, y, z) in enumerate(xi[:, 3:]):
+        hat[i, :3, :3] = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+    hat[:, :3, 3] = xi[:, :3]
+    T_dot = T @ hat  # tangents of the targets (body-frame twists)
+
+    def q_star(T):
+        return jk.solve_ik(LEGS, T, jk.neutral(LEGS), frame=FEET, throw=False).q
+
+    jvp = jax.jit(lambda T, Td: jax.jvp(q_star, (T,), (Td,)), compiler_options=FAST_COMPILE)
+    q, dq = jvp(jnp.asarray(T), jnp.asarray(T_dot))
+    np.testing.assert_allclose(fk_frames(LEGS, q[None], FEET)[0], T, atol=1e-9)
+    _, dT = jax.jvp(lambda q: jk.fk(LEGS, q, frame=FEET), (q,), (dq,))
+    np.testing.assert_allclose(dT, T_dot, atol=1e-8)
