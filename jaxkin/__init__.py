@@ -15,6 +15,7 @@ from . import configuration as configuration
 from . import derivatives as derivatives
 from . import ik as ik
 from . import inverse_velocity as inverse_velocity
+from . import motion as motion
 from . import robots as robots
 from . import sampling as sampling
 from . import spatial as spatial
@@ -69,6 +70,7 @@ from .kinematics import fk as fk
 from .kinematics import fk_all as fk_all
 from .mjcf import load_mjcf as load_mjcf
 from .model import Robot as Robot
+from .motion import retarget as retarget
 from .representations import analytical_from_geometric as analytical_from_geometric
 from .representations import rate_matrix as rate_matrix
 from .representations import representation_margin as representation_margin
@@ -145,6 +147,7 @@ __all__ = [
     "load_urdf",
     "manipulability",
     "manipulability_gradient",
+    "motion",
     "near_singular",
     "neutral",
     "normalize",
@@ -156,6 +159,7 @@ __all__ = [
     "rate_matrix",
     "representation_margin",
     "resolved_rate_control",
+    "retarget",
     "robots",
     "sample_configurations",
     "sampling",

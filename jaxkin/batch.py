@@ -20,6 +20,11 @@ one of them without touching the others:
    directory (:mod:`jaxkin.io` holds the writers).
 
 While one chunk is drained the next is already running (JAX dispatches asynchronously).
+
+:func:`chunked_scan` is the sequential counterpart: a ``lax.scan`` over the rows (each row's
+computation depends on a state carried from the previous one, such as the configuration of a
+tracked motion), chunk by chunk, the state carried across chunks, with the same inputs, outputs
+and progress bar.
 """
 
 from __future__ import annotations
@@ -34,9 +39,11 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any, TextIO
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._jit import compiler_options
 from .errors import JaxkinError, ShapeError
 from .io import ResultWriter
 
@@ -49,6 +56,7 @@ __all__ = [
     "MapStats",
     "ProgressBar",
     "chunked_map",
+    "chunked_scan",
     "stream_map",
 ]
 
@@ -340,6 +348,117 @@ def _target(out: Any, out_info: Any, n: int) -> Iterator[tuple[Any, Callable[...
             jax.tree_util.tree_map(copy, results, tree)
 
         yield results, put
+
+
+def chunked_scan(
+    step: Callable[..., Any],
+    init: Any,
+    *arrays: Any,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    progress: Any = False,
+    out: Any = None,
+    return_stats: bool = False,
+):
+    """``jax.lax.scan(step, init, arrays)`` evaluated chunk by chunk, the carry passed across
+    chunks: a sequential computation (each row depends on the previous one's state) over a
+    sequence of any length in bounded memory.
+
+    ``step(carry, *rows) -> (carry, outputs)`` is written for one row (as for ``lax.scan``):
+    ``rows[i]`` is ``arrays[i][t]``; ``carry`` a pytree of arrays whose structure, shapes and
+    dtypes ``step`` keeps. The sequence is cut into chunks as in :func:`chunked_map`, and
+    ``jax.jit`` of a ``lax.scan`` over one chunk is compiled once; each chunk starts from the
+    carry the previous one ended with, which stays on the device (the next chunk is dispatched
+    before the previous one's outputs are copied out). The last chunk is padded by repeating its
+    last row; padded rows leave the carry unchanged and their outputs are dropped, so the result
+    equals one ``lax.scan`` over the whole sequence. Runs on one device (the rows are
+    sequential: there is nothing to split).
+
+    ``arrays``, ``chunk_size``, ``progress`` and ``out`` are as for :func:`chunked_map` (inputs
+    may be row sources such as ``np.memmap``; ``out`` a pytree of arrays, a path written by a
+    :class:`~jaxkin.io.ResultWriter`, or a sink), and so are the errors raised.
+
+    Returns:
+      ``(carry, outputs)``: the final carry (JAX arrays) and the stacked per-row outputs (numpy
+      arrays of shape ``(N, ...)``; ``out`` itself, its absolute path, or the sink when given);
+      with ``return_stats=True`` the triple ``(carry, outputs, stats)`` (:class:`MapStats`).
+
+    >>> import numpy as np
+    >>> def step(total, x):
+    ...     total = total + x
+    ...     return total, {"running": total}
+    >>> xs = np.arange(5, dtype=np.float32)
+    >>> total, ys = chunked_scan(step, np.float32(0), xs, chunk_size=2)
+    >>> float(total), ys["running"].tolist()
+    (10.0, [0.0, 1.0, 3.0, 6.0, 10.0])
+    """
+    if not callable(step):
+        raise JaxkinError(f"chunked_scan: step must be callable, got {type(step).__name__}.")
+    host, n = _check_inputs(arrays)
+    mesh = _mesh([jax.devices()[0]])
+    chunk, n_chunks = _chunking(chunk_size, n)
+    carry = jax.tree_util.tree_map(jnp.asarray, init)
+
+    bar = _bar(progress, n)
+    try:
+        t0 = time.perf_counter()
+        traced = _trace_scan(step, carry, host, chunk)
+        with _target(out, traced.out_info[1], n) as (results, put):
+            if n_chunks:
+                bar.note(f"compiling for chunks of {chunk:,} rows ...")
+                compiled = traced.lower().compile(compiler_options() or None)
+            compile_seconds = time.perf_counter() - t0
+            bar.start()
+            t0 = time.perf_counter()
+            pending = None
+            for k in range(n_chunks):
+                start = k * chunk
+                stop = min(start + chunk, n)
+                rows = _feed(host, start, chunk, n, mesh)
+                carry, ys = compiled(carry, np.int32(stop - start), *rows)
+                if pending is not None:
+                    _drain(put, *pending)
+                    bar.update(pending[1] - pending[0])
+                pending = (start, stop, ys)
+            if pending is not None:
+                _drain(put, *pending)
+                bar.update(pending[1] - pending[0])
+    finally:
+        bar.close()
+    run_seconds = time.perf_counter() - t0
+    if not return_stats:
+        return carry, results
+    stats = MapStats(
+        n=n,
+        chunk_size=chunk,
+        n_chunks=n_chunks,
+        padding=n_chunks * chunk - n,
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+    )
+    return carry, results, stats
+
+
+def _trace_scan(
+    step: Callable[..., Any], carry: Any, host: list[Any], chunk: int
+) -> jax.stages.Traced:
+    """Trace ``jit`` of a ``lax.scan`` of ``step`` over ``chunk`` rows, as a function of
+    ``(carry, valid, *chunk arrays)``: rows at or past ``valid`` (padding) keep the carry.
+    ``.out_info``: ``(carry, outputs)`` shapes."""
+
+    def run(carry, valid, *xs):
+        def body(state, row):
+            c, t = state
+            new, ys = step(c, *row)
+            keep = t < valid
+            c = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), new, c)
+            return (c, t + 1), ys
+
+        (carry, _), ys = jax.lax.scan(body, (carry, jnp.int32(0)), xs)
+        return carry, ys
+
+    spec = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), carry)
+    specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype) for a in host]
+    return jax.jit(run).trace(spec, jax.ShapeDtypeStruct((), np.int32), *specs)
 
 
 def stream_map(

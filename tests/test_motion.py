@@ -1,0 +1,216 @@
+"""Motion sequences (issue 23 item 5): ``jk.motion.retarget`` tracks a sequence of whole-body
+targets, warm-started step by step, streamed in chunks through ``jaxkin.batch.chunked_scan``.
+
+Oracles: the targets are ``jk.fk`` of a smooth joint trajectory (so every step is reachable) and
+the answer is checked with ``jk.fk`` again (not the solver's Jacobian pass); the scanned run is
+compared with :func:`jaxkin.motion.track_step` called in a Python loop, and the chunked run (to
+disk) with the unchunked one; ``chunked_scan`` itself against ``lax.scan``.
+
+Compiles: the small free-floating ``LEGS`` robot (three times: unchunked, chunked, one step) and
+the zoo's Panda (float64 and float32).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxkin as jk
+from jaxkin import motion
+from jaxkin.batch import chunked_scan
+from jaxkin.ik import RESULTS
+
+LEGS = jk.Robot.from_joints(
+    [
+        dict(name="root", type="free", child="pelvis"),
+        dict(name="l_hip", type="ball", parent="pelvis", child="l_thigh", xyz=[0, 0.1, 0]),
+        dict(
+            name="l_knee",
+            type="revolute",
+            child="l_shin",
+            xyz=[0, 0, -0.4],
+            axis=[0, 1, 0],
+            lower=0.0,
+            upper=2.5,
+        ),
+        dict(name="l_foot", type="fixed", child="l_foot", xyz=[0.05, 0, -0.4]),
+        dict(name="r_hip", type="ball", parent="pelvis", child="r_thigh", xyz=[0, -0.1, 0]),
+        dict(
+            name="r_knee",
+            type="revolute",
+            child="r_shin",
+            xyz=[0, 0, -0.4],
+            axis=[0, 1, 0],
+            lower=0.0,
+            upper=2.5,
+        ),
+        dict(name="r_foot", type="fixed", child="r_foot", xyz=[0.05, 0, -0.4]),
+    ],
+    name="legs",
+    dtype=np.float64,
+)
+FEET = ["l_foot", "r_foot"]
+STEPS = 60
+
+
+def smooth_trajectory(robot: jk.Robot, q0, n: int, seed: int, scale: float = 0.3):
+    """(n, nq) configurations ``integrate(q0, v(t))``, ``v`` a sum of slow sines (within the
+    limits), and the time steps' largest change ``|difference(q_t, q_{t+1})|``."""
+    t = np.linspace(0.0, 1.5, n)
+    V = np.random.default_rng(seed).normal(size=(4, robot.nv))
+    vel = jnp.asarray(np.sin(np.outer(t, [1.0, 2.0, 3.0, 4.0])) @ V * scale, robot.dtype)
+    lo, hi = robot.lower, robot.upper
+    qs = jax.jit(jax.vmap(lambda v: jnp.clip(jk.integrate(robot, q0, v), lo, hi)))(vel)
+    return qs, max_step(robot, qs)
+
+
+def max_step(robot: jk.Robot, qs) -> float:
+    """The largest entry of ``difference(q_t, q_{t+1})`` over a sequence (n, nq)."""
+    qs = jnp.asarray(qs)
+    gaps = jax.jit(jax.vmap(lambda a, b: jk.difference(robot, a, b)))(qs[:-1], qs[1:])
+    return float(jnp.max(jnp.abs(gaps)))
+
+
+def fk_frames(robot, qs, frames):
+    return np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q, frame=frames)))(jnp.asarray(qs)))
+
+
+def fk_tip(robot, qs):
+    return np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(qs)))
+
+
+def max_pose_error(Ta, Tb):
+    return max(np.max(np.abs(Ta[..., :3, 3] - Tb[..., :3, 3])), np.max(np.abs(Ta - Tb)))
+
+
+@functools.cache
+def legs_case():
+    q0 = jk.neutral(LEGS).at[np.array([11, 16])].set(0.6)  # knees bent: away from singular
+    qs, gap = smooth_trajectory(LEGS, q0, STEPS, seed=1)
+    frames = FEET  # 12 rows, 14 velocities: redundant
+    T = fk_frames(LEGS, qs, frames)
+    res = motion.retarget(LEGS, T, qs[0], frames)
+    return qs, gap, frames, T, res
+
+
+def test_floating_base_sequence_is_tracked_and_smooth():
+    _, gap, frames, T, res = legs_case()
+    assert res.q.shape == (STEPS, LEGS.nq) and res.position_error.shape == (STEPS, 2)
+    assert np.all(res.converged), res.result
+    assert np.all(res.result == RESULTS.converged)
+    assert np.all(res.residual <= 1e-10)
+    assert max_pose_error(fk_frames(LEGS, res.q, frames), T) < 1e-6  # independent fk
+    for j in LEGS.multi_dof_joints:  # quaternions stay unit
+        qi = LEGS.q_index[j]
+        s = slice(qi + 3, qi + 7) if LEGS.kinds[j] == "free" else slice(qi, qi + 4)
+        np.testing.assert_allclose(np.linalg.norm(res.q[:, s], axis=1), 1.0, atol=1e-12)
+    # warm starts: a step needs a few iterations, and the motion has no jumps
+    assert np.all(res.iterations <= 6)
+    assert max_step(LEGS, res.q) < 2 * gap
+
+
+def test_scan_equals_solving_step_by_step():
+    qs, _, frames, T, res = legs_case()
+    q = qs[0]
+    for t in range(8):
+        step = motion.track_step(LEGS, q, T[t], frames)
+        np.testing.assert_allclose(step.q, res.q[t], rtol=0, atol=1e-12)
+        assert float(step.residual) == pytest.approx(float(res.residual[t]), abs=1e-12)
+        assert int(step.iterations) == int(res.iterations[t])
+        q = step.q
+
+
+def test_chunked_run_equals_the_unchunked_one_and_writes_to_disk(tmp_path):
+    qs, _, frames, T, res = legs_case()
+    path = motion.retarget(LEGS, T, qs[0], frames, chunk_size=16, out=tmp_path / "motion.npz")
+    assert str(path).endswith("motion.npz")
+    with np.load(path) as saved:
+        assert set(saved.files) >= {"q", "residual", "converged", "result", "iterations"}
+        np.testing.assert_allclose(saved["q"], res.q, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(saved["result"], res.result)
+        np.testing.assert_allclose(saved["position_error"], res.position_error, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- an arm
+@functools.cache
+def panda(dtype):
+    return jk.robots.load("panda", dtype=dtype)
+
+
+def arm_targets(robot, n, seed):
+    q0 = jnp.asarray([0.0, -0.4, 0.0, -2.0, 0.0, 1.6, 0.8], robot.dtype)
+    qs, gap = smooth_trajectory(robot, q0, n, seed, scale=0.5)
+    return qs, gap, np.array(fk_tip(robot, qs))
+
+
+def test_arm_sequence_is_tracked_and_a_nan_target_is_flagged_not_solved():
+    robot = panda(np.float64)
+    qs, gap, T = arm_targets(robot, 40, seed=2)
+    T[20, 0, 3] = np.nan
+    res = motion.retarget(robot, T, qs[0])  # one frame: (T, 4, 4) targets, (T,) errors
+    assert res.position_error.shape == (40,)
+    bad = np.zeros(40, bool)
+    bad[20] = True
+    assert res.result[20] == RESULTS.nonfinite and not res.converged[20]
+    assert np.isnan(res.residual[20]) and np.isnan(res.position_error[20])
+    np.testing.assert_array_equal(res.q[20], res.q[19])  # held, not a made-up answer
+    assert np.all(res.converged[~bad]) and np.all(res.residual[~bad] <= 1e-10)
+    Tq = fk_tip(robot, res.q)
+    assert max_pose_error(Tq[~bad], T[~bad]) < 1e-6
+    assert np.all(np.isfinite(res.q))
+    steps = np.abs(np.diff(res.q, axis=0))
+    assert steps.max() < 2 * gap  # redundant (7 dof): no jump between solutions
+
+
+def test_float32_sequence_with_a_posture():
+    robot = panda(np.float32)
+    qs, _, T = arm_targets(robot, 30, seed=3)
+    res = motion.retarget(robot, T.astype(np.float32), qs[0], posture=qs[0], posture_weight=0.2)
+    assert res.q.dtype == np.float32
+    assert np.all(res.converged), res.result
+    Tq = fk_tip(robot, res.q)
+    assert max_pose_error(Tq, T) < 1e-4
+
+
+def test_arguments_are_checked():
+    robot = panda(np.float64)
+    T = np.broadcast_to(np.eye(4), (3, 4, 4))
+    q0 = jnp.zeros(7)
+    with pytest.raises(jk.ShapeError, match=r"T_targets must have shape \(T, 2, 4, 4\)"):
+        motion.retarget(LEGS, T, jk.neutral(LEGS), FEET)
+    with pytest.raises(jk.JaxkinError, match="smoothness must lie in"):
+        motion.retarget(robot, T, q0, smoothness=2.0)
+    with pytest.raises(jk.JaxkinError, match="iterations must be"):
+        motion.retarget(robot, T, q0, iterations=0)
+    with pytest.raises(jk.JaxkinError, match="posture_weight must lie in"):
+        motion.retarget(robot, T, q0, posture=q0, posture_weight=-1.0)
+    with pytest.raises(jk.ShapeError, match="posture"):
+        motion.retarget(robot, T, q0, posture=jnp.zeros(3))
+    with pytest.raises(jk.ModelError):
+        motion.retarget(LEGS, np.zeros((3, 2, 4, 4)), jk.neutral(LEGS), FEET, com=np.zeros((3, 3)))
+
+
+# ----------------------------------------------------------------------------- chunked_scan
+def test_chunked_scan_equals_lax_scan_and_carries_across_padded_chunks():
+    def step(c, x, y):
+        c = 0.5 * c + x * y
+        return c, {"c": c, "x2": 2 * x}
+
+    xs = np.arange(11.0)
+    ys = np.cos(xs)
+    want_c, want = jax.lax.scan(lambda c, xy: step(c, *xy), jnp.float64(1.0), (xs, ys))
+    calls = []
+
+    class Bar:
+        def update(self, n):
+            calls.append(n)
+
+    c, got = chunked_scan(step, jnp.float64(1.0), xs, ys, chunk_size=4, progress=Bar())
+    assert float(c) == pytest.approx(float(want_c), abs=1e-15)  # the padding did not move it
+    np.testing.assert_allclose(got["c"], want["c"], atol=1e-15)
+    np.testing.assert_array_equal(got["x2"], 2 * xs)
+    assert calls == [4, 4, 3]  # 11 rows: chunks of 4, 4 and 4 (one padded row)
