@@ -38,7 +38,21 @@ SCRIPT = textwrap.dedent(
 
 
 def test_not_switched_on_by_importing_jaxkin():
-    assert not jax.config.jax_compilation_cache_dir
+    # a fresh process: this suite's conftest shares one cache between its own processes
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith(("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE"))
+    }
+    run = subprocess.run(
+        [sys.executable, "-c", "import jax, jaxkin; print(jax.config.jax_compilation_cache_dir)"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["None"]
 
 
 def test_a_second_process_loads_what_the_first_compiled(tmp_path):
