@@ -206,19 +206,24 @@ def path_joints(robot: Robot, frames) -> list:
     return sorted(joints)
 
 
-def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
+def scalar_pass(robot: Robot, q: jax.Array, frames=None, root: int | None = None) -> ScalarPass:
     """One pass from the base to every frame (or to ``frames`` only: frame indices), elementwise
     and with constants folded.
 
     Each joint's sin and cos are computed once; placements are composed entry by entry, so XLA
     fuses the kernel into a single loop over a batch. With ``frames`` only the joints on their
-    paths are traced (one frame of a large tree costs its depth, not the tree's size). ``q`` must
-    be validated (``check_q``).
+    paths are traced (one frame of a large tree costs its depth, not the tree's size). With
+    ``root`` (a frame index on every path of ``frames``) the poses are relative to that frame
+    (identity at ``root``) and only the joints below it are computed: the model's constants
+    fold below a free-flyer, whose rotation is then applied once per result instead of into
+    every pose. ``q`` must be validated (``check_q``).
     """
     dtype = result_dtype(robot, q)
     q = q.astype(dtype)
     n = robot.n_joints
     joints = list(range(n)) if frames is None else path_joints(robot, frames)
+    if root is not None:
+        joints = [j for j in joints if root - 1 in robot.ancestors(j + 1)[:-1]]
     K = _constants(robot, dtype, None if frames is None else joints)
     used = sorted(
         {
@@ -235,6 +240,8 @@ def scalar_pass(robot: Robot, q: jax.Array, frames=None) -> ScalarPass:
     zs: list = [None] * n
     os: list = [None] * n
     Rs[0], ps[0] = K.base
+    if root is not None:
+        Rs[root], ps[root] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (0.0, 0.0, 0.0)
     for j in joints:
         kind, parent, qi = robot.kinds[j], robot.parents[j], robot.q_index[j]
         R, p = Rs[parent], ps[parent]
