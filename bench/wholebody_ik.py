@@ -68,11 +68,24 @@ def frame_errors(robot, qs, T, frames):
     return ep, eo
 
 
-def run_robot(name: str, n: int, repeats: int) -> dict:
+def is_solved(ep: np.ndarray, eo: np.ndarray) -> np.ndarray:
+    """Per target whether every frame is within ``TOL_M`` and ``TOL_RAD`` of its target."""
+    return (ep <= TOL_M) & (eo <= TOL_RAD)
+
+
+def make_targets(name: str, n: int) -> tuple[jk.Robot, list[str], np.ndarray]:
+    """The robot (float64, free-flyer root), its frames and (n, k, 4, 4) reachable targets: the
+    frames' poses at ``n`` configurations drawn by ``jk.sample_configurations`` (fixed key)."""
     path, frames = ROBOTS[name]
     robot = jk.robots.load(path, floating_base=True, dtype=np.float64)
     qs = jk.sample_configurations(robot, n, key=2026)
     T = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q, frame=frames)))(qs))
+    return robot, frames, T
+
+
+def run_robot(name: str, n: int, repeats: int) -> dict:
+    path = ROBOTS[name][0]
+    robot, frames, T = make_targets(name, n)
     q0 = jk.neutral(robot)
 
     def solve():
@@ -84,7 +97,7 @@ def run_robot(name: str, n: int, repeats: int) -> dict:
     timing = first_and_repeats(solve, repeats)
     sol = timing.pop("result")
     ep, eo = frame_errors(robot, np.asarray(sol.q), T, frames)
-    solved = (ep <= TOL_M) & (eo <= TOL_RAD)
+    solved = is_solved(ep, eo)
     steps = np.asarray(sol.steps)
     return {
         "robot": name,
