@@ -45,22 +45,7 @@ from .report import (
     timed,
     write_json,
 )
-
-ROBOTS = {
-    "g1": (
-        "erd/g1_29dof_rev_1_0",
-        ["left_ankle_roll_link", "right_ankle_roll_link", "left_rubber_hand", "right_rubber_hand"],
-    ),
-    "talos": (
-        "erd/talos_reduced",
-        [
-            "left_sole_link",
-            "right_sole_link",
-            "gripper_left_motor_double_link",
-            "gripper_right_motor_double_link",
-        ],
-    ),
-}
+from .wholebody_ik import ROBOTS
 
 
 def random_q(robot: jk.Robot, n: int, seed: int = 0) -> np.ndarray:

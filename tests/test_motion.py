@@ -18,42 +18,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _legs import FEET, LEGS
 
 import jaxkin as jk
 from jaxkin import motion
 from jaxkin.batch import chunked_scan
 from jaxkin.ik import RESULTS
 
-LEGS = jk.Robot.from_joints(
-    [
-        dict(name="root", type="free", child="pelvis"),
-        dict(name="l_hip", type="ball", parent="pelvis", child="l_thigh", xyz=[0, 0.1, 0]),
-        dict(
-            name="l_knee",
-            type="revolute",
-            child="l_shin",
-            xyz=[0, 0, -0.4],
-            axis=[0, 1, 0],
-            lower=0.0,
-            upper=2.5,
-        ),
-        dict(name="l_foot", type="fixed", child="l_foot", xyz=[0.05, 0, -0.4]),
-        dict(name="r_hip", type="ball", parent="pelvis", child="r_thigh", xyz=[0, -0.1, 0]),
-        dict(
-            name="r_knee",
-            type="revolute",
-            child="r_shin",
-            xyz=[0, 0, -0.4],
-            axis=[0, 1, 0],
-            lower=0.0,
-            upper=2.5,
-        ),
-        dict(name="r_foot", type="fixed", child="r_foot", xyz=[0.05, 0, -0.4]),
-    ],
-    name="legs",
-    dtype=np.float64,
-)
-FEET = ["l_foot", "r_foot"]
 STEPS = 60
 
 
@@ -190,8 +161,9 @@ def test_arguments_are_checked():
         motion.retarget(robot, T, q0, posture=q0, posture_weight=-1.0)
     with pytest.raises(jk.ShapeError, match="posture"):
         motion.retarget(robot, T, q0, posture=jnp.zeros(3))
-    with pytest.raises(jk.ModelError):
-        motion.retarget(LEGS, np.zeros((3, 2, 4, 4)), jk.neutral(LEGS), FEET, com=np.zeros((3, 3)))
+    arm = jk.robots.load("panda")  # a DH table: no masses, so no centre-of-mass target
+    with pytest.raises(jk.ModelError, match="no inertial data"):
+        motion.retarget(arm, np.zeros((3, 4, 4)), jk.neutral(arm), com=np.zeros((3, 3)))
 
 
 # ----------------------------------------------------------------------------- chunked_scan
