@@ -486,9 +486,11 @@ def retarget(
       ``(result, stats)``.
 
     Raises:
-      ShapeError: ``T_targets``, ``com`` or ``q0`` of the wrong shape. JaxkinError: bad
-      settings. ModelError: ``com=`` for a robot without masses. Non-finite targets raise
-      nothing: their steps are flagged ``nonfinite`` (module doc).
+      ShapeError: ``T_targets``, ``com`` or ``q0`` of the wrong shape.
+      JaxkinError: bad settings.
+      ModelError: ``com=`` for a robot without masses.
+
+    Non-finite targets raise no error: their steps are flagged ``nonfinite`` (module doc).
 
     >>> import numpy as np, jaxkin as jk
     >>> robot = jk.robots.load("two_link_planar")
