@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._traces import is_traced, is_tracer
-from .errors import JaxkinError, ShapeError
+from .errors import JaxkinError, ModelError, ShapeError
 from .model import Robot
 
 REFERENCES = ("world_aligned", "local", "world")
@@ -470,3 +470,39 @@ def check_path(Ts: Any, what: str, fn: str) -> Any:
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 2:
         raise ShapeError(f"{fn}: {what} must have shape (N, 4, 4) with N >= 2, got {Ts.shape}.")
     return Ts
+
+
+def check_inertia(robot: Robot, fn: str) -> None:
+    """Raise :class:`~jaxkin.ModelError` unless ``robot`` has inertial data and (when its leaves
+    are concrete) a positive total mass: the check of every entry point that uses the centre of
+    mass, done once, eagerly."""
+    if not robot.has_inertia:
+        raise no_inertia_error(robot, fn)
+    if not is_traced(robot.frame_mass) and robot.frame_mass.ndim == 1:
+        total = float(np.sum(np.asarray(robot.frame_mass, dtype=np.float64)))
+        if not total > 0.0:
+            raise ModelError(
+                f"{fn}: robot {robot.name!r} has total mass {total!r} kg (robot.mass), so its "
+                "centre of mass is undefined. Give its links positive masses (URDF "
+                '<inertial><mass value="..."/>, MJCF <inertial mass=...> or geoms, '
+                "from_joints inertial=dict(mass=...)), or robot.replace(frame_mass=...)."
+            )
+
+
+def no_inertia_error(robot: Robot, fn: str) -> ModelError:
+    """The error for a robot without inertial data, saying why it has none and the fix."""
+    if robot.parameterisation != "placement":
+        why = "a Denavit-Hartenberg table has no masses"
+    else:
+        why = (
+            "its description gave none (a URDF whose links have no <inertial>, joint specs "
+            "without inertial=, or an MJCF model whose masses MuJoCo infers from mesh geoms, "
+            "which jaxkin does not read)"
+        )
+    return ModelError(
+        f"{fn}: robot {robot.name!r} has no inertial data (masses), so it has no centre of "
+        f"mass: {why}. Load a description with masses (a URDF with <inertial> in its links, an "
+        "MJCF model with <inertial> or primitive geoms; from_joints specs with inertial=...), "
+        "or give them: robot.replace(frame_mass=..., frame_com=..., frame_inertia=..., "
+        "has_inertia=True) (shapes (n_frames,), (n_frames, 3), (n_frames, 3, 3))."
+    )

@@ -34,11 +34,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_q
+from ._checks import check_inertia, check_q, no_inertia_error
 from ._forward import forward_pass
 from ._jit import eager
-from ._traces import is_traced
-from .errors import ModelError
 from .model import Robot
 
 __all__ = ["center_of_mass", "com_jacobian"]  # kernels for solvers: com_and_jacobian, com_kernel
@@ -89,47 +87,12 @@ def com_jacobian(robot: Robot, q: Any) -> jax.Array:
     return _com_jacobian(robot, q)
 
 
-def check_inertia(robot: Robot, fn: str) -> None:
-    """Raise :class:`~jaxkin.ModelError` unless ``robot`` has inertial data and (when its leaves
-    are concrete) a positive total mass: the check of every entry point that uses the centre of
-    mass, done once, eagerly."""
-    if not robot.has_inertia:
-        raise _no_inertia(robot, fn)
-    if not is_traced(robot.frame_mass) and robot.frame_mass.ndim == 1:
-        total = float(np.sum(np.asarray(robot.frame_mass, dtype=np.float64)))
-        if not total > 0.0:
-            raise ModelError(
-                f"{fn}: robot {robot.name!r} has total mass {total!r} kg (robot.mass), so its "
-                "centre of mass is undefined. Give its links positive masses (URDF "
-                '<inertial><mass value="..."/>, MJCF <inertial mass=...> or geoms, '
-                "from_joints inertial=dict(mass=...)), or robot.replace(frame_mass=...)."
-            )
-
-
-def _no_inertia(robot: Robot, fn: str) -> ModelError:
-    if robot.parameterisation != "placement":
-        why = "a Denavit-Hartenberg table has no masses"
-    else:
-        why = (
-            "its description gave none (a URDF whose links have no <inertial>, joint specs "
-            "without inertial=, or an MJCF model whose masses MuJoCo infers from mesh geoms, "
-            "which jaxkin does not read)"
-        )
-    return ModelError(
-        f"{fn}: robot {robot.name!r} has no inertial data (masses), so it has no centre of "
-        f"mass: {why}. Load a description with masses (a URDF with <inertial> in its links, an "
-        "MJCF model with <inertial> or primitive geoms; from_joints specs with inertial=...), "
-        "or give them: robot.replace(frame_mass=..., frame_com=..., frame_inertia=..., "
-        "has_inertia=True) (shapes (n_frames,), (n_frames, 3), (n_frames, 3, 3))."
-    )
-
-
 # ----------------------------------------------------------------------------- kernels
 def com_kernel(robot: Robot, q: jax.Array) -> jax.Array:
     """The centre of mass (3,) of a checked ``q``; nothing is checked but ``robot.has_inertia``
     (static). NaN for a total mass of 0."""
     if not robot.has_inertia:
-        raise _no_inertia(robot, "com_kernel")
+        raise no_inertia_error(robot, "com_kernel")
     fp = forward_pass(robot, q)
     m, c = _frame_centres(robot, fp)
     return jnp.sum(m[:, None] * c, axis=0) / jnp.sum(m)
@@ -140,7 +103,7 @@ def com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
     one forward pass; nothing is checked but ``robot.has_inertia`` (static), so solvers call it
     inside their loops (after :func:`check_inertia`). NaN for a total mass of 0."""
     if not robot.has_inertia:
-        raise _no_inertia(robot, "com_and_jacobian")
+        raise no_inertia_error(robot, "com_and_jacobian")
     fp = forward_pass(robot, q)
     dtype = fp.p.dtype
     m, c = _frame_centres(robot, fp)

@@ -73,6 +73,7 @@ import numpy as np
 from . import configuration, sampling, spatial
 from ._checks import (
     check_frames,
+    check_inertia,
     check_poses,
     check_q,
     check_robot,
@@ -83,7 +84,7 @@ from ._forward import frame_pose, frame_poses
 from ._jacobian_pass import jacobian_pass, jacobians_pass
 from ._jit import robot_jit
 from ._linalg import unrolled_cholesky
-from .com import check_inertia, com_and_jacobian
+from .com import com_and_jacobian
 from .configuration import integrate_kernel
 from .errors import JaxkinError, ShapeError
 from .ik_gradients import damped_pinv_apply, full_rank, solution_tangent

@@ -56,12 +56,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import check_frames, check_q, check_robot, refuse_nonfinite
+from ._checks import check_frames, check_inertia, check_q, check_robot, refuse_nonfinite
 from ._forward import frame_poses
 from ._jacobian_pass import jacobians_pass
 from ._jit import robot_jit
 from .batch import chunked_scan
-from .com import check_inertia, com_and_jacobian
+from .com import com_and_jacobian
 from .configuration import difference, integrate_kernel
 from .errors import JaxkinError, ShapeError
 from .ik import RESULTS

@@ -80,6 +80,7 @@ import numpy as np
 from . import spatial
 from ._checks import (
     check_frames,
+    check_inertia,
     check_poses,
     check_q,
     check_reference,
@@ -91,7 +92,7 @@ from ._checks import (
 )
 from ._jacobian_pass import jacobians_pass
 from ._jit import robot_jit
-from .com import check_inertia, com_and_jacobian
+from .com import com_and_jacobian
 from .configuration import difference, integrate_kernel
 from .errors import JaxkinError, ShapeError
 from .model import Robot
