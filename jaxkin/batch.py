@@ -266,18 +266,14 @@ def chunked_map(
             compile_seconds = time.perf_counter() - t0
             bar.start()
             t0 = time.perf_counter()
-            pending = None  # (start, stop, device results) of the chunk in flight
-            for k in range(n_chunks):
-                start = k * chunk
-                stop = min(start + chunk, n)
-                running = (start, stop, compiled(*_feed(host, start, chunk, n, mesh)))
-                if pending is not None:
-                    _drain(put, *pending)
-                    bar.update(pending[1] - pending[0])
-                pending = running
-            if pending is not None:
-                _drain(put, *pending)
-                bar.update(pending[1] - pending[0])
+            _pipelined(
+                n,
+                chunk,
+                n_chunks,
+                lambda start: compiled(*_feed(host, start, chunk, n, mesh)),
+                put,
+                bar,
+            )
     finally:
         bar.close()
     run_seconds = time.perf_counter() - t0
@@ -409,19 +405,15 @@ def chunked_scan(
             compile_seconds = time.perf_counter() - t0
             bar.start()
             t0 = time.perf_counter()
-            pending = None
-            for k in range(n_chunks):
-                start = k * chunk
-                stop = min(start + chunk, n)
+            state = [carry]
+
+            def launch(start: int) -> Any:
                 rows = _feed(host, start, chunk, n, mesh)
-                carry, ys = compiled(carry, np.int32(stop - start), *rows)
-                if pending is not None:
-                    _drain(put, *pending)
-                    bar.update(pending[1] - pending[0])
-                pending = (start, stop, ys)
-            if pending is not None:
-                _drain(put, *pending)
-                bar.update(pending[1] - pending[0])
+                state[0], ys = compiled(state[0], np.int32(min(start + chunk, n) - start), *rows)
+                return ys
+
+            _pipelined(n, chunk, n_chunks, launch, put, bar)
+            carry = state[0]
     finally:
         bar.close()
     run_seconds = time.perf_counter() - t0
@@ -700,6 +692,24 @@ def _to_host(x: jax.Array) -> np.ndarray:
 
         return np.asarray(multihost_utils.process_allgather(x, tiled=True))
     return np.asarray(x)
+
+
+def _pipelined(n: int, chunk: int, n_chunks: int, launch: Callable[[int], Any], put, bar) -> None:
+    """Run ``launch(start)`` for each of the ``n_chunks`` chunks of ``n`` rows (``chunk`` rows
+    each, the last padded) and hand each finished chunk to ``put``, one chunk behind: the next
+    chunk is dispatched before the previous one's results are copied to the host, so the device
+    never waits for the writer. Shared by :func:`chunked_map` and :func:`chunked_scan`."""
+    pending = None  # (start, stop, device results) of the chunk in flight
+    for k in range(n_chunks):
+        start = k * chunk
+        running = (start, min(start + chunk, n), launch(start))
+        if pending is not None:
+            _drain(put, *pending)
+            bar.update(pending[1] - pending[0])
+        pending = running
+    if pending is not None:
+        _drain(put, *pending)
+        bar.update(pending[1] - pending[0])
 
 
 def _drain(put: Callable[..., None], start: int, stop: int, device_out: Any) -> None:
