@@ -1,5 +1,5 @@
 """Jacobian benchmark: jaxkin against Pinocchio, pytorch_kinematics, MuJoCo and the Robotics
-Toolbox, on the same URDFs (Panda, UR5, a 32-joint chain).
+Toolbox, on the same URDFs (Panda, UR5, a 32-joint chain; Talos and G1 with free-flyer roots).
 
 For each robot (see :mod:`bench.peers`), quantity and dtype:
 
@@ -11,19 +11,28 @@ For each robot (see :mod:`bench.peers`), quantity and dtype:
 * peers (geometric Jacobian): pytorch_kinematics batched (float32, float64), MuJoCo (a Python
   loop, and ``mujoco.batch.Batch``), Robotics Toolbox ETS (a Python loop); Python loops time
   ``min(N, cap)`` configurations;
-* Pinocchio from Python, one call per configuration, is the reference: one Pinocchio sample of
-  the same quantity follows every sample of every row, in the same process, and each row's ratio
-  is the row's rate over the Pinocchio rate measured beside it;
-* every row is checked numerically: jaxkin against Pinocchio, peers against jaxkin (float64).
+* Pinocchio from Python, one call per configuration on pre-built q arrays, is the reference:
+  one Pinocchio sample of the same quantity follows every sample of every row, in the same
+  process, and each row's ratio is the row's rate over the Pinocchio rate measured beside it;
+  for geometric Jacobians two loops are sampled (:class:`PinReference`): each result stored into
+  a preallocated array (``ratio_vs_pin_stored``, the loop of a user who wants the N Jacobians)
+  and results dropped (``ratio_vs_pin``);
+* free-flyer humanoids (:class:`FreeFlyerBench`, ``bench.peers.HUMANOIDS``): Talos one hand in
+  ``world_aligned`` and ``local``, G1 both feet and both hands in one
+  ``jk.geometric_jacobian(robot, q, frame=[...])`` call, float64, against
+  ``bench.peers.PinocchioFrames`` (both loops);
+* every row is checked numerically before it is timed: jaxkin against Pinocchio (a float64 row
+  whose largest difference over ``max(1, max |value|)`` exceeds :data:`CHECK_TOL` is marked
+  failed and not timed), peers against jaxkin (float64).
 
 Configurations come from ``jk.sample_configurations`` (fixed keys), joint rates from
 :func:`bench.report.joint_rates`. This module measures; :mod:`bench.jacobian_report` prints the
 tables, writes the README section and plots.
 
-Usage: ``python3 -m bench [--quick] [--robots panda,ur5] [--ns 1,100] [--write-readme]
-[--from-json PATH]``. Writes ``bench/results/latest.json`` and ``latest.png`` (``quick.*``
-with ``--quick``), prints the tables; ``--write-readme`` replaces the generated section of
-bench/README.md.
+Usage: ``python3 -m bench [--quick] [--robots panda,ur5,chain32,talos,g1] [--ns 1,100]
+[--write-readme] [--from-json PATH]``. Writes ``bench/results/latest.json`` and ``latest.png``
+(``quick.*`` with ``--quick``), prints the tables; ``--write-readme`` replaces the generated
+section of bench/README.md.
 """
 
 from __future__ import annotations
@@ -61,6 +70,7 @@ from .report import (
 )
 
 SEED = 20240607  # configurations and joint rates of every robot
+CHECK_TOL = 1e-12  # float64 rows: largest difference from Pinocchio over max(1, max |value|)
 
 FULL = dict(
     ns=(1, 100, 10_000, 100_000, 1_000_000),
@@ -164,7 +174,21 @@ def _finish(row: dict[str, Any]) -> dict[str, Any]:
             pin = median(row["pin_samples_s"])
             row["pin_per_s"] = 1.0 / pin
             row["ratio_vs_pin"] = pin / per
+        if row.get("pin_stored_samples_s"):
+            pin = median(row["pin_stored_samples_s"])
+            row["pin_stored_per_s"] = 1.0 / pin
+            row["ratio_vs_pin_stored"] = pin / per
     return row
+
+
+def check(row: dict[str, Any], got: np.ndarray, want: np.ndarray, against: str) -> None:
+    """Record the largest difference of ``got`` from ``want``; a float64 row whose difference
+    over ``max(1, max |want|)`` exceeds :data:`CHECK_TOL` is marked failed (and not timed)."""
+    diff = float(np.abs(got - want).max())
+    scaled = diff / max(1.0, float(np.abs(want).max()))
+    row.update(max_abs_diff=diff, scaled_diff=scaled, diff_against=against)
+    if row["dtype"] == "float64" and not scaled <= CHECK_TOL:
+        row["status"] = f"failed: differs from {against} by {scaled:.1e} (scaled) > {CHECK_TOL:g}"
 
 
 def _progress(row: dict[str, Any]) -> None:
@@ -177,6 +201,8 @@ def _progress(row: dict[str, Any]) -> None:
     if "compile_s" in row:
         comp = f"compile {row['lower_s'] + row['compile_s']:5.2f} s, "
     ratio = f", {row['ratio_vs_pin']:.2f}x Pinocchio" if "ratio_vs_pin" in row else ""
+    if "ratio_vs_pin_stored" in row:
+        ratio += f" ({row['ratio_vs_pin_stored']:.2f}x its stored loop)"
     diff = row.get("max_abs_diff", math.nan)
     log(f"{what}: {comp}{fmt_rate(row['per_s'])}/s{ratio}, diff {diff:.1e}")
 
@@ -188,15 +214,106 @@ def _too_slow(per_config: float | None, n: int, cfg: dict[str, Any]) -> str | No
     return f"skipped: predicted {per_config * n:.1f} s per call > {cfg['max_call_s']} s"
 
 
+# ---------------------------------------------------------------------------- Pinocchio
+
+
+class PinReference:
+    """Interleaved Pinocchio samples (seconds per configuration): calling it times the loop
+    without storing the results (returned: the ``Timer`` reference, ``pin_samples_s``) and, when
+    there is one, the loop that stores each result into a preallocated array (collected in
+    ``stored``: ``pin_stored_samples_s``), the two taking turns at going first. Each loop runs
+    over the first ``m`` prepared configurations, ``m`` chosen so that a sample lasts about
+    ``pin_target_s``."""
+
+    def __init__(
+        self,
+        cfg: dict[str, Any],
+        make: Callable[[int], tuple[Callable, Callable | None]],
+        inputs: tuple[list, ...],
+    ):
+        bare, _ = make(50)
+        _, t = timed(lambda: bare(*(x[:50] for x in inputs)))
+        m = int(min(len(inputs[0]), max(200, cfg["pin_target_s"] / max(t / 50, 1e-9))))
+        self.bare, self.stored_loop = make(m)
+        self.inputs = tuple(x[:m] for x in inputs)
+        self.stored: list[float] = []
+        self.calls = 0
+
+    def _time(self, loop: Callable) -> float:
+        return timed(lambda: loop(*self.inputs))[1] / len(self.inputs[0])
+
+    def __call__(self) -> float:
+        if self.stored_loop is None:
+            return self._time(self.bare)
+        self.calls += 1
+        if self.calls % 2:
+            self.stored.append(self._time(self.stored_loop))
+            return self._time(self.bare)
+        bare = self._time(self.bare)
+        self.stored.append(self._time(self.stored_loop))
+        return bare
+
+    def take(self) -> dict[str, list[float]]:
+        """The stored loop's samples since the last call (for the row just timed)."""
+        out, self.stored = self.stored, []
+        return dict(pin_stored_samples_s=out) if out else {}
+
+
 # ---------------------------------------------------------------------------- one robot
 
 
-class RobotBench:
+class Bench:
+    """What the per-robot benchmarks share: timing against an interleaved reference, the
+    compiled jaxkin row (compile apart, HLO profile, numerical check before timing)."""
+
+    def __init__(self, cfg: dict[str, Any]):
+        self.cfg = cfg
+        self.timer = Timer(cfg)
+        self.rows: list[dict[str, Any]] = []
+
+    def add(self, row: dict[str, Any]) -> dict[str, Any]:
+        _finish(row)
+        self.rows.append(row)
+        _progress(row)
+        return row
+
+    def samples(self, call: Callable[[], Any], n: int, ref: PinReference | None) -> dict:
+        """``Timer.samples`` and, with a reference, its stored-loop samples."""
+        out = self.timer.samples(call, n, ref)
+        if ref is not None:
+            out.update(ref.take())
+        return out
+
+    def compiled_row(self, row, fn, args, want: Callable[[int], np.ndarray], ref, pick=None):
+        """Lower and compile ``fn`` for ``args`` (timed apart), profile its HLO, skip it when it
+        needs more than ``mem_limit``, check its first ``check`` answers against ``want(k)``
+        (Pinocchio) and time it against ``ref`` if they agree."""
+        cfg, n = self.cfg, row["n"]
+        lowered, lower_s = timed(lambda: fn.lower(*args))
+        compiled, compile_s = timed(lowered.compile)
+        row.update(lower_s=lower_s, compile_s=compile_s, hlo=_hlo_stats(lowered, compiled, n))
+        need = sum(row["hlo"].get(k, 0) for k in ("temp_bytes", "out_bytes", "arg_bytes"))
+        if need > cfg["mem_limit"]:
+            limit = cfg["mem_limit"] / 1e9
+            row["status"] = f"skipped: the kernel needs {need / 1e9:.1f} GB > {limit:g} GB"
+            return
+        del lowered, compiled
+        # served from the executable compiled above
+        out, row["first_call_s"] = timed(lambda: jax.block_until_ready(fn(*args)))
+        k = min(n, cfg["check"])
+        got = np.asarray(out if pick is None else pick(out), dtype=np.float64)[:k]
+        del out
+        check(row, got, want(k), "Pinocchio")
+        if row["status"] == "ok":
+            row.update(self.samples(lambda: jax.block_until_ready(fn(*args)), n, ref))
+
+
+class RobotBench(Bench):
     """Everything measured for one robot."""
 
     def __init__(self, src: P.RobotSource, cfg: dict[str, Any], seed: int):
-        self.src, self.cfg = src, cfg
-        self.timer = Timer(cfg)
+        super().__init__(cfg)
+        self.src = src
         self.r64, self.how = P.jaxkin_robot(src, np.float64)
         self.r32, _ = P.jaxkin_robot(src, np.float32)
         self.pin = P.Pinocchio(src, self.r64)
@@ -223,29 +340,19 @@ class RobotBench:
             peers={},
             peers_failed={},
         )
-        self.rows: list[dict[str, Any]] = []
 
     def _configurations(self, n: int, key) -> np.ndarray:
         return np.asarray(jk.sample_configurations(self.r64, n, key), dtype=np.float64)
 
-    def pin_ref(self, quantity: str) -> Callable[[], float]:
-        """One interleaved Pinocchio sample of ``quantity``: seconds per configuration of a loop
-        over about ``pin_target_s`` worth of configurations."""
+    def pin_ref(self, quantity: str) -> PinReference:
+        """Interleaved Pinocchio samples of ``quantity`` (the geometric Jacobian also with each
+        result stored into a preallocated array)."""
         loop = self.pin.loop(quantity)
-        _, t = timed(lambda: loop(self.pin_q[:50], self.pin_qd[:50]))
-        m = int(min(len(self.pin_q), max(200, self.cfg["pin_target_s"] / max(t / 50, 1e-9))))
-        qs, qds = self.pin_q[:m], self.pin_qd[:m]
 
-        def sample() -> float:
-            return timed(lambda: loop(qs, qds))[1] / len(qs)
+        def make(m: int):
+            return loop, (self.pin.stored_loop(m) if quantity == "geometric" else None)
 
-        return sample
-
-    def add(self, row: dict[str, Any]) -> dict[str, Any]:
-        _finish(row)
-        self.rows.append(row)
-        _progress(row)
-        return row
+        return PinReference(self.cfg, make, (self.pin_q, self.pin_qd))
 
     # -------------------------------------------------------------- jaxkin, batched
     def jaxkin(self) -> None:
@@ -270,29 +377,17 @@ class RobotBench:
                 jax.clear_caches()
 
     def _jaxkin_row(self, row, fn, ref) -> None:
-        cfg, n, quantity, dtype = self.cfg, row["n"], row["quantity"], row["dtype"]
+        n, quantity, dtype = row["n"], row["quantity"], row["dtype"]
         q64, qd64 = self.q_pool[:n], self.qd_pool[:n]
         args = [jnp.asarray(q64.astype(dtype))]
         if quantity == "twist":
             args.append(jnp.asarray(qd64.astype(dtype)))
-        lowered, lower_s = timed(lambda: fn.lower(*args))
-        compiled, compile_s = timed(lowered.compile)
-        row.update(lower_s=lower_s, compile_s=compile_s, hlo=_hlo_stats(lowered, compiled, n))
-        need = sum(row["hlo"].get(k, 0) for k in ("temp_bytes", "out_bytes", "arg_bytes"))
-        if need > cfg["mem_limit"]:
-            limit = cfg["mem_limit"] / 1e9
-            row["status"] = f"skipped: the kernel needs {need / 1e9:.1f} GB > {limit:g} GB"
-            return
-        del lowered, compiled
-        # served from the executable compiled above
-        out, row["first_call_s"] = timed(lambda: jax.block_until_ready(fn(*args)))
-        got = np.asarray(out[0] if quantity == "analytical" else out, dtype=np.float64)
-        k = min(n, cfg["check"])
-        want = _pin_values(self.pin, quantity, q64[:k], qd64[:k])
-        row["max_abs_diff"] = float(np.abs(got[:k] - want).max())
-        row["diff_against"] = "Pinocchio"
-        del out, got
-        row.update(self.timer.samples(lambda: jax.block_until_ready(fn(*args)), n, ref))
+
+        def want(k: int) -> np.ndarray:
+            return _pin_values(self.pin, quantity, q64[:k], qd64[:k])
+
+        pick = (lambda out: out[0]) if quantity == "analytical" else None
+        self.compiled_row(row, fn, args, want, ref, pick)
 
     # -------------------------------------------------------------- jaxkin, one q from Python
     def single(self) -> None:
@@ -306,15 +401,15 @@ class RobotBench:
             # first call: trace + compile + run
             J, row["first_call_s"] = timed(lambda fn=fn, q=q: jax.block_until_ready(fn(q)))
             J = np.asarray(J, dtype=np.float64)
-            row["max_abs_diff"] = float(np.abs(J - self.pin.geometric(q64)).max())
-            row["diff_against"] = "Pinocchio"
-            row.update(self.timer.samples(lambda fn=fn, q=q: jax.block_until_ready(fn(q)), 1, ref))
+            check(row, J, self.pin.geometric(q64), "Pinocchio")
+            if row["status"] == "ok":
+                row.update(self.samples(lambda fn=fn, q=q: jax.block_until_ready(fn(q)), 1, ref))
             self.add(row)
         # Pinocchio, one call for one configuration (per-call microseconds)
         pin_one = self.pin.loop("geometric")
         q1 = [np.ascontiguousarray(q64)]
         row = _row(self.src.name, "pinocchio single", "geometric", "float64", 1)
-        row.update(self.timer.samples(lambda: pin_one(q1, q1), 1, None))
+        row.update(self.samples(lambda: pin_one(q1, q1), 1, None))
         self.add(row)
 
     # -------------------------------------------------------------- peers
@@ -370,7 +465,7 @@ class RobotBench:
                 row["status"] = f"skipped: needs about {need / 1e9:.1f} GB"
             else:
                 prepared = peer.prepare(self.q_pool[:n])
-                row.update(self.timer.samples(lambda p=prepared: peer.run(p), n, ref))
+                row.update(self.samples(lambda p=prepared: peer.run(p), n, ref))
                 if n >= 100:  # N = 1 is all overhead: no prediction from it
                     per_config = median(row["samples_s"])
                 del prepared
@@ -388,11 +483,102 @@ class RobotBench:
             row = self._peer_row(peer, diff, n, n_timed=m)
             if m not in measured:
                 prepared = peer.prepare(self.q_pool[:m])
-                measured[m] = self.timer.samples(lambda p=prepared: peer.run(p), m, ref)
+                measured[m] = self.samples(lambda p=prepared: peer.run(p), m, ref)
             else:
                 row["reused_from_n_timed"] = m
             row.update(measured[m])
             self.add(row)
+
+
+class FreeFlyerBench(Bench):
+    """A free-flyer humanoid (``bench.peers.HUMANOIDS``): for each of its cases, jaxkin
+    ``jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q, frame=..., reference=...)))``
+    in float64 against Pinocchio's loops on the same configurations (:class:`PinReference`:
+    results dropped, and stored into a preallocated array), each row checked against Pinocchio
+    before it is timed."""
+
+    def __init__(self, src: P.RobotSource, cfg: dict[str, Any], seed: int):
+        super().__init__(cfg)
+        self.src = src
+        self.r64, how = P.jaxkin_robot(src, np.float64)
+        key = jax.random.key(seed)
+        self.q_pool = self._configurations(max(cfg["ns"]), jax.random.fold_in(key, 0))
+        self.pin_q = self._configurations(cfg["pin_configs"], jax.random.fold_in(key, 1))
+        self.info = dict(
+            urdf=src.origin,
+            tip=src.tip,
+            dof=self.r64.nv,
+            nq=self.r64.nq,
+            n_joints=self.r64.n_joints,
+            jaxkin=how,
+            floating_base=True,
+            scan_path=bool(jk.kinematics.uses_scan(self.r64)),
+            cases={},
+            peers={},
+            peers_failed={},
+        )
+
+    def _configurations(self, n: int, key) -> np.ndarray:
+        return np.asarray(jk.sample_configurations(self.r64, n, key), dtype=np.float64)
+
+    def peers(self) -> None:
+        """Record why each batched peer is not timed on a free-flyer robot (and what checks
+        were possible)."""
+        try:
+            why = P.torch_free_flyer_check(self.src, self.r64, self.q_pool[:2])
+        except Exception as e:
+            why = f"{type(e).__name__}: {e}"
+        self.info["peers_failed"]["pytorch_kinematics"] = why
+        log(f"  {self.src.name}: pytorch_kinematics: {why}")
+
+    def run(self) -> None:
+        for case in self.src.cases:
+            try:
+                pin = P.PinocchioFrames(self.src, self.r64, case)
+            except Exception as e:  # reported, not fatal
+                self.info["cases"][case.quantity] = dict(error=f"{type(e).__name__}: {e}")
+                log(f"  {self.src.name} {case.quantity}: Pinocchio failed: {e}")
+                continue
+            self._case(case, pin)
+            jax.clear_caches()
+
+    def _case(self, case: P.Case, pin: P.PinocchioFrames) -> None:
+        cfg, robot = self.cfg, self.r64
+        frame = list(case.frames) if case.several else case.frames[0]
+        q4 = self.q_pool[:4]
+        poses = np.stack([np.asarray(jk.fk(robot, q, frame=list(case.frames))) for q in q4])
+        J4 = pin.jacobians(q4)
+        self.info["cases"][case.quantity] = dict(
+            frames=list(case.frames),
+            reference=case.reference,
+            jaxkin=f"jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q, frame={frame!r}, "
+            f"reference={case.reference!r})))",
+            pinocchio=pin.how,
+            pose_diff_vs_pinocchio=float(np.abs(poses - pin.poses(q4)).max()),
+            nonzero_columns=int((np.abs(J4).max(axis=tuple(range(J4.ndim - 1))) > 0).sum()),
+        )
+        pin_qs = pin.prepare(self.pin_q)
+        ref = PinReference(cfg, lambda m: (pin.loop(False, m), pin.loop(True, m)), (pin_qs,))
+        fn = jax.jit(
+            jax.vmap(
+                lambda q: jk.geometric_jacobian(robot, q, frame=frame, reference=case.reference)
+            )
+        )
+        per_config = None  # seconds per configuration at the last N >= 100
+        for n in cfg["ns"]:
+            row = _row(self.src.name, "jaxkin", case.quantity, "float64", n)
+            skip = _too_slow(per_config, n, cfg)
+            if skip:
+                row["status"] = skip
+            else:
+                q64 = self.q_pool[:n]
+                self.compiled_row(
+                    row, fn, [jnp.asarray(q64)], lambda k, q=q64: pin.jacobians(q[:k]), ref
+                )
+                if row["status"] == "ok" and n >= 100:
+                    per_config = median(row["samples_s"])
+            self.add(row)
+        del fn
 
 
 def dispatch_floor_s(cfg: dict[str, Any]) -> float:
@@ -413,7 +599,9 @@ def _parse_ns(text: str) -> tuple[int, ...]:
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python3 -m bench", description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="smoke run: N in (1, 1000), 2 repeats")
-    parser.add_argument("--robots", default="", help="comma-separated subset of panda,ur5,chain32")
+    parser.add_argument(
+        "--robots", default="", help="comma-separated subset of panda,ur5,chain32,talos,g1"
+    )
     parser.add_argument("--ns", default="", help="comma-separated batch sizes (override)")
     parser.add_argument("--no-peers", action="store_true", help="jaxkin and Pinocchio only")
     parser.add_argument("--out", type=Path, default=None, help="where to write the JSON results")
@@ -438,12 +626,19 @@ def measure(cfg: dict[str, Any], args: argparse.Namespace, out_name: str) -> dic
     names = [x for x in args.robots.split(",") if x] or None
     for src in P.robot_sources(names):
         log(f"{src.name}: {src.origin}")
-        rb = RobotBench(src, cfg, SEED)
-        robots[src.name] = rb.info
-        rb.single()
-        rb.jaxkin()
-        if not args.no_peers:
-            rb.peers()
+        if src.floating_base:
+            rb = FreeFlyerBench(src, cfg, SEED)
+            robots[src.name] = rb.info
+            rb.run()
+            if not args.no_peers:
+                rb.peers()
+        else:
+            rb = RobotBench(src, cfg, SEED)
+            robots[src.name] = rb.info
+            rb.single()
+            rb.jaxkin()
+            if not args.no_peers:
+                rb.peers()
         rows += rb.rows
         del rb
         gc.collect()

@@ -4,17 +4,31 @@ Robots (:func:`robot_sources`): example-robot-data's Panda (``erd/panda``: ``pan
 ``panda_hand_tcp``, fingers removed) and UR5 (``erd/ur5_robot``: ``ur5_robot.urdf``, tip
 ``tool0``), found by ``jaxkin.robots.example_robot_data``, and a serial chain of
 :data:`CHAIN_JOINTS` revolute joints built with ``jk.Robot.from_joints`` (:func:`chain_robot`)
-and written as URDF by ``jk.to_urdf``. Visual, collision, transmission and gazebo elements are
-stripped (kinematics only; no mesh is ever opened); everything else is the file as shipped.
+and written as URDF by ``jk.to_urdf``; and two free-flyer humanoids (:data:`HUMANOIDS`), each
+with its :class:`Case` rows: Talos (``erd/talos_reduced``) one hand (:data:`TALOS_HAND`) in
+``world_aligned`` and in ``local``, and the G1 (``erd/g1_29dof_rev_1_0``) with both feet and
+both hands in one multi-frame call (the frames of ``bench.wholebody``). Visual, collision,
+transmission and gazebo elements are stripped (kinematics only; no mesh is ever opened);
+everything else is the file as shipped.
 
-jaxkin builds each robot from that URDF text with ``jk.load_urdf(text, tip=...)``.
+jaxkin builds each robot from that URDF text with ``jk.load_urdf(text, tip=...)``, a humanoid
+with ``jk.load_urdf(text, floating_base=True)``. :class:`PinocchioLayout` maps jaxkin's
+``(q, v)`` to a Pinocchio model's (quaternion order, column order): the one place the bench
+writes it.
 
 Peers, each verified numerically against jaxkin before it is timed (same frame, same quantity):
 
 * :class:`Pinocchio`: ``pin.buildModelFromXML`` (joints not in jaxkin's ``q`` locked), one Python
-  call per configuration: ``computeFrameJacobian(..., LOCAL_WORLD_ALIGNED)``; analytical: that,
+  call per configuration: ``computeFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` (results dropped,
+  or each stored into a preallocated array: :meth:`Pinocchio.stored_loop`); analytical: that,
   ``rpy.matrixToRpy`` and ``rpy.computeRpyJacobianInverse``; twist: ``forwardKinematics(q, v)``
   and ``getFrameVelocity(..., LOCAL_WORLD_ALIGNED)``.
+* :class:`PinocchioFrames` (humanoids): ``pin.buildModelFromXML(urdf, JointModelFreeFlyer())``,
+  pre-built q arrays in Pinocchio's layout; one frame: ``computeFrameJacobian`` per
+  configuration; several: ``computeJointJacobians`` + ``updateFramePlacements`` + one
+  ``getFrameJacobian`` per frame; results stored into a preallocated array or dropped.
+  pytorch_kinematics has no free-flyer joint: :func:`torch_free_flyer_check` checks the part it
+  computes and says why it is not timed.
 * :class:`TorchKinematics`: ``pytorch_kinematics.build_serial_chain_from_urdf`` and
   ``chain.jacobian(th)``, batched, float32 and float64 CPU tensors.
 * :class:`MujocoLoop`: the URDF with :data:`MUJOCO_COMPILER` inserted (as in
@@ -50,6 +64,8 @@ import numpy as np
 
 import jaxkin as jk
 from jaxkin.robots import example_robot_data
+
+from .report import version
 
 CHAIN_JOINTS = 32
 
@@ -100,16 +116,72 @@ def chain_robot(n: int = CHAIN_JOINTS) -> jk.Robot:
     return jk.Robot.from_joints(joints, root="base", name=f"chain{n}", dtype=np.float64)
 
 
+@dataclass(frozen=True)
+class Case:
+    """One free-flyer row: the Jacobians of ``frames`` (one name: a (6, nv) Jacobian; several:
+    one ``jk.geometric_jacobian(robot, q, frame=[...])`` call) in ``reference``."""
+
+    quantity: str  # the row's name in the tables
+    frames: tuple[str, ...]
+    reference: str  # jaxkin's reference ("world_aligned" or "local")
+    several: bool  # the frame argument is a list (multi-frame API), even for one name
+
+
 @dataclass
 class RobotSource:
     name: str
     urdf: str  # stripped URDF text, shared by jaxkin and every peer
     tip: str
     origin: str  # where the URDF comes from
+    floating_base: bool = False  # a free-flyer root joint (jaxkin ``floating_base=True``)
+    cases: tuple[Case, ...] = ()  # the rows of a free-flyer robot (:data:`HUMANOIDS`)
+
+
+TALOS_HAND = "gripper_left_base_link"
+"""Talos's left hand: the gripper's base, fixed to ``arm_left_7_link`` (root, 2 torso joints and
+7 arm joints on its path: 15 of the 38 columns)."""
+
+
+def _g1_frames() -> tuple[str, ...]:
+    from .wholebody_ik import ROBOTS
+
+    return tuple(ROBOTS["g1"][1])  # both ankles (feet) and both hands, as bench.wholebody
+
+
+def _humanoid(name: str, path: str, cases: tuple[Case, ...], what: str) -> RobotSource:
+    return RobotSource(
+        name,
+        erd_urdf(path),
+        cases[0].frames[0],
+        f"example-robot-data {example_robot_data.path(path).name} ({what}; free-flyer root)",
+        floating_base=True,
+        cases=cases,
+    )
+
+
+HUMANOIDS = {
+    "talos": lambda: _humanoid(
+        "talos",
+        "erd/talos_reduced",
+        (
+            Case("hand, world-aligned", (TALOS_HAND,), "world_aligned", False),
+            Case("hand, local", (TALOS_HAND,), "local", False),
+        ),
+        f"one hand: {TALOS_HAND}",
+    ),
+    "g1": lambda: _humanoid(
+        "g1",
+        "erd/g1_29dof_rev_1_0",
+        (Case("feet + hands, world-aligned", _g1_frames(), "world_aligned", True),),
+        "both feet and both hands: " + ", ".join(_g1_frames()),
+    ),
+}
+"""Free-flyer humanoids (:func:`robot_sources` names ``talos``, ``g1``): the G1 and its frames
+are those of ``bench.wholebody`` and ``bench.wholebody_ik``."""
 
 
 def robot_sources(names: list[str] | None = None) -> list[RobotSource]:
-    """Panda, UR5 and the generated chain (or the named subset, in that order)."""
+    """Panda, UR5, the generated chain, Talos and G1 (or the named subset, in that order)."""
     makers = {
         "panda": lambda: RobotSource(
             "panda",
@@ -129,6 +201,7 @@ def robot_sources(names: list[str] | None = None) -> list[RobotSource]:
             "tip",
             f"generated URDF string: {CHAIN_JOINTS} revolute joints, axes z/y/x, tool 'tip'",
         ),
+        **HUMANOIDS,
     }
     chosen = list(makers) if not names else names
     unknown = [n for n in chosen if n not in makers]
@@ -146,8 +219,91 @@ def axis_aligned(robot: jk.Robot) -> bool:
 
 def jaxkin_robot(src: RobotSource, dtype) -> tuple[jk.Robot, str]:
     """The jaxkin robot for ``src`` and how it was built."""
+    if src.floating_base:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # e.g. G1's and Talos's zero-mass links
+            robot = jk.load_urdf(src.urdf, floating_base=True, dtype=dtype, name=src.name)
+        return robot, f"jk.load_urdf(<{src.name} URDF>, floating_base=True)"
     robot = jk.load_urdf(src.urdf, tip=src.tip, dtype=dtype, name=src.name)
     return robot, f"jk.load_urdf(<{src.name} URDF>, tip={src.tip!r})"
+
+
+PINOCCHIO_COORDINATES = {
+    "JointModelFreeFlyer": (
+        ("x", "y", "z", "qx", "qy", "qz", "qw"),
+        ("vx", "vy", "vz", "wx", "wy", "wz"),
+    ),
+    "JointModelSpherical": (("qx", "qy", "qz", "qw"), ("wx", "wy", "wz")),
+    "JointModelPlanar": (("x", "y", "cos", "sin"), ("vx", "vy", "wz")),
+}
+"""Per Pinocchio multi-DOF joint kind, the jaxkin suffixes (``<joint>.<suffix>``) of its q and v
+entries in Pinocchio's order."""
+
+
+class PinocchioLayout:
+    """jaxkin's ``(q, v)`` against Pinocchio's ``(nq, nv)`` layout, for a Pinocchio model whose
+    joints carry jaxkin's joint names (a free-flyer root added by Pinocchio is ``root_joint``,
+    as jaxkin's ``floating_base=True`` names it).
+
+    ``q_src[i]`` is the jaxkin ``q`` index of Pinocchio's ``q[i]``, ``v_src[i]`` the jaxkin ``v``
+    index of Pinocchio's ``v[i]`` (= Jacobian column i). Joint kinds: 1-DOF joints; free flyers
+    (jaxkin ``<j>.x, .y, .z, .qw, .qx, .qy, .qz`` and ``<j>.vx ... .wz``; Pinocchio's quaternion
+    is ``(x, y, z, w)``); spherical (``<j>.qx ... .qw``, ``<j>.wx ... .wz``); planar (``<j>.x, .y,
+    .cos, .sin``, ``<j>.vx, .vy, .wz``). Both models use child-frame axes for a free flyer's
+    velocity, so columns map one to one. Raises ``RuntimeError`` for another kind or a name
+    jaxkin does not have.
+    """
+
+    def __init__(self, robot: jk.Robot, model) -> None:
+        qi = {n: i for i, n in enumerate(robot.joint_names)}
+        vi = {n: i for i, n in enumerate(robot.velocity_names)}
+        self.q_src = np.zeros(model.nq, dtype=int)
+        self.v_src = np.zeros(model.nv, dtype=int)
+        try:
+            for jid in range(1, model.njoints):
+                name, joint = model.names[jid], model.joints[jid]
+                if joint.nq == 1:
+                    self.q_src[joint.idx_q], self.v_src[joint.idx_v] = qi[name], vi[name]
+                    continue
+                kind = joint.shortname()
+                if kind not in PINOCCHIO_COORDINATES:
+                    raise RuntimeError(
+                        f"joint {name!r} is a Pinocchio {kind}: only 1-DOF, free-flyer, spherical "
+                        "and planar joints are mapped"
+                    )
+                qn, vn = PINOCCHIO_COORDINATES[kind]
+                for k, c in enumerate(qn):
+                    self.q_src[joint.idx_q + k] = qi[f"{name}.{c}"]
+                for k, c in enumerate(vn):
+                    self.v_src[joint.idx_v + k] = vi[f"{name}.{c}"]
+        except KeyError as e:
+            raise RuntimeError(f"Pinocchio's model has {e} that jaxkin's robot lacks") from None
+        if sorted(self.q_src) != list(range(robot.nq)) or sorted(self.v_src) != list(
+            range(robot.nv)
+        ):
+            raise RuntimeError(
+                f"Pinocchio's nq={model.nq}, nv={model.nv} do not cover jaxkin's nq={robot.nq}, "
+                f"nv={robot.nv} one to one"
+            )
+
+    def q(self, q: np.ndarray) -> np.ndarray:
+        """jaxkin configurations (..., nq) in Pinocchio's order (a copy)."""
+        return np.ascontiguousarray(np.asarray(q)[..., self.q_src])
+
+    def v(self, v: np.ndarray) -> np.ndarray:
+        """jaxkin velocities (..., nv) in Pinocchio's order (a copy)."""
+        return np.ascontiguousarray(np.asarray(v)[..., self.v_src])
+
+    def columns_to_pinocchio(self, J: np.ndarray) -> np.ndarray:
+        """jaxkin Jacobians (..., nv) with their columns in Pinocchio's velocity order."""
+        return np.asarray(J)[..., self.v_src]
+
+    def columns_to_jaxkin(self, J: np.ndarray) -> np.ndarray:
+        """Pinocchio Jacobians (..., nv) with their columns in jaxkin's velocity order."""
+        J = np.asarray(J)
+        out = np.empty_like(J)
+        out[..., self.v_src] = J
+        return out
 
 
 # ---------------------------------------------------------------------------- peers
@@ -251,6 +407,130 @@ class Pinocchio:
 
         return twist
 
+    def stored_loop(self, n: int):
+        """A function ``f(qs, qds)`` computing the geometric Jacobian of every row (at most
+        ``n``), each stored into a preallocated (n, 6, nv) array, as a user collecting the N
+        Jacobians writes it (``qds`` unused)."""
+        import pinocchio as pin
+
+        model, data, fid, lwa = self.model, self.data, self.fid, _lwa()
+        jac, out = pin.computeFrameJacobian, np.empty((n, 6, model.nv))
+
+        def stored(qs, qds):
+            for i, q in enumerate(qs):
+                out[i] = jac(model, data, q, fid, lwa)
+
+        return stored
+
+
+def pin_reference(name: str):
+    """Pinocchio's ReferenceFrame for jaxkin's reference ``name``."""
+    import pinocchio as pin
+
+    rf = pin.ReferenceFrame
+    return {"world_aligned": rf.LOCAL_WORLD_ALIGNED, "local": rf.LOCAL, "world": rf.WORLD}[name]
+
+
+class PinocchioFrames:
+    """Pinocchio from Python on the free-flyer model of ``src``
+    (``pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer())``): the Jacobians of a
+    :class:`Case`'s frames in its reference, written as a user who wants N Jacobians in an array
+    writes it. Inputs are pre-built q arrays in Pinocchio's layout (:class:`PinocchioLayout`).
+
+    One frame: ``computeFrameJacobian(model, data, q, frame, reference)`` per configuration.
+    Several: ``computeJointJacobians`` + ``updateFramePlacements`` + one ``getFrameJacobian``
+    per frame. :meth:`loop` times it with each result stored into a preallocated (N, [k,] 6, nv)
+    array (``stored=True``) or dropped.
+    """
+
+    def __init__(self, src: RobotSource, robot64: jk.Robot, case: Case):
+        import pinocchio as pin
+
+        model = pin.buildModelFromXML(src.urdf, pin.JointModelFreeFlyer())
+        self.layout = PinocchioLayout(robot64, model)
+        missing = [f for f in case.frames if not model.existFrame(f)]
+        if missing:
+            raise RuntimeError(f"Pinocchio's {src.name} has no frame {missing}")
+        self.model, self.data, self.case = model, model.createData(), case
+        self.ids = [model.getFrameId(f) for f in case.frames]
+        self.rf = pin_reference(case.reference)
+        self.version = pin.__version__
+        rf = str(self.rf).rsplit(".", 1)[-1]
+        self.how = (
+            f"computeJointJacobians + updateFramePlacements + getFrameJacobian({rf}) per frame"
+            if case.several
+            else f"computeFrameJacobian({rf})"
+        ) + " per configuration; pre-built q arrays in Pinocchio's layout"
+
+    def prepare(self, q64: np.ndarray) -> list[np.ndarray]:
+        """jaxkin configurations (n, nq) as a list of Pinocchio-layout q arrays (untimed)."""
+        return list(self.layout.q(q64))
+
+    def shape(self, n: int) -> tuple[int, ...]:
+        """The shape of ``n`` configurations' Jacobians: (n, 6, nv) or (n, k, 6, nv)."""
+        k = (len(self.ids),) if self.case.several else ()
+        return (n, *k, 6, self.model.nv)
+
+    def loop(self, stored: bool, n: int, out: np.ndarray | None = None):
+        """A function ``f(qs)`` computing every Jacobian of at most ``n`` prepared
+        configurations, each stored into ``out`` (preallocated here when not given) when
+        ``stored``."""
+        import pinocchio as pin
+
+        model, data, ids, rf = self.model, self.data, self.ids, self.rf
+        if out is None:
+            out = np.empty(self.shape(n))
+        if not self.case.several:
+            jac, fid = pin.computeFrameJacobian, ids[0]
+
+            def one_stored(qs):
+                for i, q in enumerate(qs):
+                    out[i] = jac(model, data, q, fid, rf)
+
+            def one(qs):
+                for q in qs:
+                    jac(model, data, q, fid, rf)
+
+            return one_stored if stored else one
+        joints, place, get = (
+            pin.computeJointJacobians,
+            pin.updateFramePlacements,
+            pin.getFrameJacobian,
+        )
+
+        def several_stored(qs):
+            for i, q in enumerate(qs):
+                joints(model, data, q)
+                place(model, data)
+                for k, fid in enumerate(ids):
+                    out[i, k] = get(model, data, fid, rf)
+
+        def several(qs):
+            for q in qs:
+                joints(model, data, q)
+                place(model, data)
+                for fid in ids:
+                    get(model, data, fid, rf)
+
+        return several_stored if stored else several
+
+    def jacobians(self, q64: np.ndarray) -> np.ndarray:
+        """float64 (n, 6, nv), or (n, k, 6, nv) for several frames, in jaxkin's column order."""
+        qs = self.prepare(q64)
+        out = np.empty(self.shape(len(qs)))
+        self.loop(True, len(qs), out)(qs)
+        return self.layout.columns_to_jaxkin(out)
+
+    def poses(self, q64: np.ndarray) -> np.ndarray:
+        """(n, k, 4, 4) world poses of the case's frames."""
+        import pinocchio as pin
+
+        out = []
+        for q in self.prepare(q64):
+            pin.framesForwardKinematics(self.model, self.data, q)
+            out.append([self.data.oMf[f].homogeneous.copy() for f in self.ids])
+        return np.array(out)
+
 
 class Peer:
     """A Jacobian peer: ``prepare(q64)`` (untimed), ``run(prepared)`` (timed), and
@@ -352,6 +632,48 @@ class TorchKinematics(Peer):
         # (frames, N, 4, 4) transforms, a few temporaries of that size, the (N, 6, dof) result
         item = 4 if self.dtype == "float32" else 8
         return item * (4 * self.n_frames * 16 + 3 * 6 * self.n_frames)
+
+
+def urdf_root(text: str) -> str:
+    """The root link of a URDF text (the link that is no joint's child)."""
+    root = ET.fromstring(text)
+    children = {j.find("child").get("link") for j in root.iter("joint")}
+    return next(link.get("name") for link in root.iter("link") if link.get("name") not in children)
+
+
+def torch_free_flyer_check(src: RobotSource, robot64: jk.Robot, q64: np.ndarray) -> str:
+    """Why pytorch_kinematics is not timed on a free-flyer robot, and the check of what it does
+    compute: it has no free-flyer joint, so ``build_serial_chain_from_urdf(urdf, frame)`` gives
+    the fixed-base Jacobian of the frame's chain joints in the root link's axes; rotated by the
+    base orientation it must equal those columns of jaxkin's world-aligned Jacobian at ``q64``."""
+    import pytorch_kinematics as pk
+    import torch
+
+    frames = list(dict.fromkeys(f for case in src.cases for f in case.frames))
+    root = urdf_root(src.urdf)
+    J_all = np.stack([np.asarray(jk.geometric_jacobian(robot64, q, frame=frames)) for q in q64])
+    R = np.stack([np.asarray(jk.fk(robot64, q, frame=root))[:3, :3] for q in q64])
+    diffs, counts = [], []
+    for i, frame in enumerate(frames):
+        with quiet():
+            chain = pk.build_serial_chain_from_urdf(src.urdf.encode(), frame, root)
+        chain = chain.to(dtype=torch.float64)
+        names = chain.get_joint_parameter_names()
+        qi = [robot64.joint_names.index(n) for n in names]
+        vi = [robot64.velocity_names.index(n) for n in names]
+        with torch.no_grad():
+            Jt = chain.jacobian(torch.as_tensor(q64[:, qi])).numpy()
+        rotated = np.concatenate([R @ Jt[:, :3], R @ Jt[:, 3:]], axis=1)
+        diffs.append(float(np.abs(rotated - J_all[:, i][..., vi]).max()))
+        counts.append(len(names))
+    return (
+        f"pytorch-kinematics {version('pytorch-kinematics')} has no free-flyer joint: "
+        f"`build_serial_chain_from_urdf(urdf, frame)` gives the fixed-base Jacobian of the "
+        f"frame's {'/'.join(map(str, counts))} chain joints in {root}'s axes, without the base's "
+        f"6 columns (checked: rotated by the base orientation it equals those columns of "
+        f"jaxkin's to {max(diffs):.1e}); a smaller quantity than the (6, {robot64.nv}) rows, "
+        "so not timed"
+    )
 
 
 MUJOCO_COMPILER = (

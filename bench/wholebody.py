@@ -9,9 +9,10 @@ the joints uniform within their limits) are computed by
   ``jk.com_jacobian`` and ``jk.geometric_jacobian(robot, q, frame=[four frames])`` (world-aligned);
   the first call (trace + compile + run) is timed apart from the steady state;
 * Pinocchio from Python, the way a user who wants the N answers in an array writes it: pre-built
-  q arrays in Pinocchio's order, one ``centerOfMass`` / ``jacobianCenterOfMass`` per configuration,
-  or ``computeJointJacobians`` + ``updateFramePlacements`` + one ``getFrameJacobian``
-  (``LOCAL_WORLD_ALIGNED``) per frame, each result stored into a preallocated array.
+  q arrays in Pinocchio's order (``bench.peers.PinocchioLayout``), one ``centerOfMass`` /
+  ``jacobianCenterOfMass`` per configuration, or ``computeJointJacobians`` +
+  ``updateFramePlacements`` + one ``getFrameJacobian`` (``LOCAL_WORLD_ALIGNED``) per frame, each
+  result stored into a preallocated array.
 
 Rounds alternate (jaxkin, Pinocchio, jaxkin, ...); each rate is the median of ``--repeats``
 rounds. Every jaxkin answer is compared with Pinocchio's (largest difference printed; the
@@ -35,6 +36,7 @@ import numpy as np
 import jaxkin as jk
 from jaxkin.robots import example_robot_data as erd
 
+from .peers import PinocchioLayout
 from .report import (
     RESULTS_DIR,
     fmt_rate,
@@ -64,20 +66,10 @@ def random_q(robot: jk.Robot, n: int, seed: int = 0) -> np.ndarray:
 
 
 def pinocchio_order(robot: jk.Robot, model) -> tuple[np.ndarray, np.ndarray]:
-    """For each Pinocchio q entry the jaxkin q index, for each v entry the jaxkin v index."""
-    qi = {n: i for i, n in enumerate(robot.joint_names)}
-    vi = {n: i for i, n in enumerate(robot.velocity_names)}
-    q_src, v_src = np.zeros(model.nq, dtype=int), np.zeros(model.nv, dtype=int)
-    for jid in range(1, model.njoints):
-        name, joint = model.names[jid], model.joints[jid]
-        if joint.nq == 1:
-            q_src[joint.idx_q], v_src[joint.idx_v] = qi[name], vi[name]
-            continue
-        for k, c in enumerate(["x", "y", "z", "qx", "qy", "qz", "qw"]):
-            q_src[joint.idx_q + k] = qi[f"{name}.{c}"]
-        for k, c in enumerate(["vx", "vy", "vz", "wx", "wy", "wz"]):
-            v_src[joint.idx_v + k] = vi[f"{name}.{c}"]
-    return q_src, v_src
+    """For each Pinocchio q entry the jaxkin q index, for each v entry the jaxkin v index
+    (``bench.peers.PinocchioLayout``'s ``q_src`` and ``v_src``)."""
+    layout = PinocchioLayout(robot, model)
+    return layout.q_src, layout.v_src
 
 
 def pinocchio_runners(model, frames: list[str], qp: np.ndarray) -> dict:
@@ -139,8 +131,8 @@ def measure(name: str, n: int, repeats: int) -> list[dict]:
     robot = jk.load_urdf(file, floating_base=True, dtype=np.float64)
     model = pin.buildModelFromUrdf(str(file), pin.JointModelFreeFlyer())
     Q = random_q(robot, n, seed=7)
-    q_src, v_src = pinocchio_order(robot, model)
-    qp = np.ascontiguousarray(Q[:, q_src])
+    layout = PinocchioLayout(robot, model)
+    qp = layout.q(Q)
     peers = pinocchio_runners(model, frames, qp)
     rows = []
     for quantity, kernel in jaxkin_kernels(robot, frames).items():
@@ -154,7 +146,7 @@ def measure(name: str, n: int, repeats: int) -> list[dict]:
             theirs.append(t)
         mine = np.asarray(out)
         if mine.shape[-1] == robot.nv:  # Jacobian columns into Pinocchio's velocity order
-            mine = mine[..., v_src]
+            mine = layout.columns_to_pinocchio(mine)
         diff = float(np.max(np.abs(mine - ref)))
         rows.append(
             dict(
