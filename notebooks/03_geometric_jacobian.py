@@ -126,7 +126,7 @@ display(J_pq4)
 rp = jk.robots.load("rp_arm", d1=0.3)
 J_np = sp.lambdify((t1, d1, d2), J_pq4, "numpy")
 qs = rng.uniform(np.asarray(rp.lower), np.asarray(rp.upper), size=(1000, 2))
-Js = jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(rp, q)))(qs)
+Js = np.asarray(jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(rp, q)))(qs))  # numpy rows
 err = max(
     np.max(np.abs(np.asarray(J_np(q[0], 0.3, q[1]), dtype=float) - J))
     for q, J in zip(qs, Js, strict=True)

@@ -28,6 +28,14 @@ from jaxkin import inverse_velocity as iv
 
 robot = jk.robots.load("niryo_one")
 
+
+def fk_each(robot, qs):
+    """(n, 4, 4) poses of the rows of qs, one jk.fk call each: the kernel jk.fk compiles for one
+    configuration of a robot serves every row, however many (a jax.vmap over the rows would be
+    compiled again for each number of rows)."""
+    return np.stack([np.asarray(jk.fk(robot, q)) for q in np.asarray(qs)])
+
+
 # %% [markdown]
 # ## Measures of manipulability
 #
@@ -128,7 +136,7 @@ T_path = np.repeat(T_start[None], s.size, axis=0)
 T_path[:, 1, 3] += 0.1 * s  # 10 cm along y
 T_path[:, 2, 3] -= 0.05 * s  # and 5 cm down
 run = iv.resolved_rate_control(robot, q_ref, T_path, dt=0.01)
-tip = np.asarray(jax.vmap(lambda q: jk.fk(robot, q)[:3, 3])(run.q))
+tip = fk_each(robot, run.q)[:, :3, 3]
 print(f"largest tracking error: {float(run.max_position_error) * 1e3:.3f} mm,",
       f"{float(run.max_orientation_error):.1e} rad")  # fmt: skip
 fig = plt.figure(figsize=(10, 4.5))
@@ -157,11 +165,11 @@ fig.tight_layout()
 
 # %%
 q_true = rng.uniform(0.8 * np.asarray(robot.lower), 0.8 * np.asarray(robot.upper), size=(50, 6))
-targets = jax.vmap(lambda q: jk.fk(robot, q))(q_true)
+targets = fk_each(robot, q_true)
 sol = ik.solve_ik(robot, targets, np.zeros(6), num_seeds=8, throw=False)
 converged = np.asarray(sol.converged)
-reached = jax.vmap(lambda q: jk.fk(robot, q))(sol.q)
-pos_err = np.linalg.norm(np.asarray(reached[:, :3, 3] - targets[:, :3, 3]), axis=1)
+reached = fk_each(robot, sol.q)
+pos_err = np.linalg.norm(reached[:, :3, 3] - targets[:, :3, 3], axis=1)
 print(f"converged: {converged.sum()} of {len(converged)};",
       f"position error of those: max {pos_err[converged].max():.1e} m")  # fmt: skip
 print(
@@ -196,7 +204,7 @@ for name in ident.unidentifiable:  # e.g. "xyz[1, 2]"
 
 xyz_true = np.asarray(robot.params["xyz"]) + np.where(free, rng.normal(0.0, 1e-3, free.shape), 0.0)
 true_robot = robot.replace(params={**robot.params, "xyz": jnp.asarray(xyz_true)})
-T_meas = np.array(jax.vmap(lambda q: jk.fk(true_robot, q))(q_meas))  # a writable copy
+T_meas = fk_each(true_robot, q_meas)
 T_meas[:, :3, 3] += rng.normal(0.0, 20e-6, (40, 3))  # tracker noise, 20 um
 
 fit = calibration.calibrate(

@@ -149,8 +149,10 @@ print("largest hand position error:", res.position_error[:, 2].max(), "m; centre
 
 # %%
 qs = res.q
-coms = np.asarray(jax.jit(jax.vmap(lambda q: jk.center_of_mass(robot, q)))(qs))
-hands = np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q, frame=HAND)))(qs))[:, :3, 3]
+# one call per step: the kernels compiled above for one configuration (jk.center_of_mass for
+# c0, jk.fk for T_hand0) serve every step, with no new compile
+coms = np.stack([np.asarray(jk.center_of_mass(robot, q)) for q in qs])
+hands = np.stack([np.asarray(jk.fk(robot, q, frame=HAND))[:3, 3] for q in qs])
 
 fig, (top, side) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=(1.4, 1))
 for T in T_feet:
