@@ -30,6 +30,16 @@ def _fast_compile_options() -> dict:
 FAST_COMPILE = _fast_compile_options()
 
 
+@functools.cache
+def sampler(robot, n: int):
+    """``key -> jk.sample_configurations(robot, n, key)`` as one compiled program (called eagerly,
+    each ``jax.random`` primitive compiles on its own, with XLA's slower default options)."""
+    import jaxkin as jk
+
+    draw = functools.partial(jk.sample_configurations, robot, n)
+    return jax.jit(draw, compiler_options=FAST_COMPILE)
+
+
 def op_by_op(test):
     """``test`` run under ``jax.disable_jit()``: for a property over random robots (put it below
     ``@given``). Each example's robot is used once, and compiling programs for it (jaxkin's eager

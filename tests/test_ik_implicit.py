@@ -11,11 +11,14 @@ one). Tolerance: 1e-6 relative (the issue's target)."""
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
+from _xla import FAST_COMPILE, sampler
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -52,6 +55,12 @@ def _hat(xi: np.ndarray) -> np.ndarray:
 GENERATORS = np.stack([_hat(e) for e in np.eye(6)])  # (6, 4, 4), [v; omega]
 
 
+@functools.cache
+def _steps(h: float) -> np.ndarray:
+    """``expm(h X_j)`` (6, 4, 4) for the six generators (scipy), computed once per step."""
+    return np.stack([scipy.linalg.expm(h * X) for X in GENERATORS])
+
+
 class _Solver:
     """``solve(T (B,4,4), q0 (B,dof), T_dot (B,4,4), tol)`` -> (IKSolution, dq), one compile."""
 
@@ -64,7 +73,7 @@ class _Solver:
 
             return jax.jvp(solve, (T,), (T_dot,))
 
-        self.fn = jax.jit(run)
+        self.fn = jax.jit(run, compiler_options=FAST_COMPILE)
 
     def __call__(self, T, q0, T_dot=None, tol=FD_TOL, damping=1e-3):
         T = np.asarray(T)
@@ -108,8 +117,8 @@ def _derivatives(solver, T, q0):
     ok = np.ones(n, bool)
     fds = []
     for h in (2 * H, H):  # Richardson: (4 D(h) - D(2h)) / 3 cancels the h^2 term
-        plus = np.stack([T[i] @ scipy.linalg.expm(h * X) for i in range(n) for X in GENERATORS])
-        minus = np.stack([T[i] @ scipy.linalg.expm(-h * X) for i in range(n) for X in GENERATORS])
+        plus = np.stack([T[i] @ E for i in range(n) for E in _steps(h)])
+        minus = np.stack([T[i] @ E for i in range(n) for E in _steps(-h)])
         # Gauss-Newton from the solution (damping at its floor): one smooth path for +h and -h
         both, _ = solver(np.concatenate([plus, minus]), np.concatenate([qs, qs]), damping=1e-12)
         ok &= (both.residual <= FD_TOL).reshape(2, n, 6).all(axis=(0, 2))
@@ -240,9 +249,9 @@ def test_active_limit_matches_finite_differences_of_the_held_arm(solvers):
         fds = []
         for h in (2 * H, H):
             d = []
-            for X in GENERATORS:
-                plus, res_p = _held_newton(robot, T[i] @ scipy.linalg.expm(h * X), q[i], k)
-                minus, res_m = _held_newton(robot, T[i] @ scipy.linalg.expm(-h * X), q[i], k)
+            for E_plus, E_minus in zip(_steps(h), _steps(-h), strict=True):
+                plus, res_p = _held_newton(robot, T[i] @ E_plus, q[i], k)
+                minus, res_m = _held_newton(robot, T[i] @ E_minus, q[i], k)
                 assert max(res_p, res_m) <= 1e-13
                 d.append((plus - minus) / (2 * h))
             fds.append(np.stack(d))
@@ -290,7 +299,7 @@ def test_trac_ik_protocol_small(solvers, name):
     solver = solvers(name)
     robot = solver.robot
     rng_key = jax.random.key(2024)
-    q_star = np.asarray(jk.sample_configurations(robot, B, rng_key))
+    q_star = np.asarray(sampler(robot, B)(rng_key))
     T = _poses(robot, q_star)
     lo, hi = (np.asarray(b) for b in jk.sampling_bounds(robot))
     mid = 0.5 * (lo + hi)
@@ -350,7 +359,8 @@ def calibration():
     q_measured[:, 2] = rng.uniform(0.5, 2.0, 8) * rng.choice([-1, 1], 8)  # away from the elbow
     q_measured[:, 4] = rng.uniform(0.5, 2.5, 8) * rng.choice([-1, 1], 8)  # and wrist singularity
     T = _poses(true, q_measured)
-    vg = jax.jit(jax.value_and_grad(_calibration_loss, has_aux=True))
+    loss_and_grad = jax.value_and_grad(_calibration_loss, has_aux=True)
+    vg = jax.jit(loss_and_grad, compiler_options=FAST_COMPILE)
     return true, T, q_measured, vg
 
 
@@ -390,11 +400,16 @@ def test_calibration_through_ik_recovers_the_tool_offset(calibration):
     p = jnp.array([0.0, 0.0, 0.1])  # nominal offset, 3 cm from the true one
     opt = optax.chain(optax.scale_by_lbfgs(), optax.clip_by_global_norm(2e-3), optax.scale(-1.0))
     state = opt.init(p)
+
+    @jax.jit  # one compile (optax's L-BFGS update called eagerly traces its scans every step)
+    def lbfgs_step(g, state, p):
+        updates, state = opt.update(g.tool[:3, 3], state, p)
+        return optax.apply_updates(p, updates), state
+
     for _ in range(60):
         robot = true.replace(tool=true.tool.at[:3, 3].set(p))
         (value, conv), g = vg(robot, T, q_measured)
-        updates, state = opt.update(g.tool[:3, 3], state, p)
-        p = optax.apply_updates(p, updates)
+        p, state = lbfgs_step(g, state, p)
     assert np.all(conv), (p, value, conv)
     np.testing.assert_allclose(p, true.tool[:3, 3], rtol=0, atol=1e-6)
     assert value < 1e-10
@@ -416,7 +431,10 @@ def test_float32_jacrev_under_jit_and_vmap(solvers):
     n = len(T)
     assert n >= 2
     q0 = q_star + 0.05
-    jac = jax.jit(jax.vmap(jax.jacrev(lambda T, q0: jk.solve_ik(r32, T, q0, throw=False).q)))
+    jac = jax.jit(
+        jax.vmap(jax.jacrev(lambda T, q0: jk.solve_ik(r32, T, q0, throw=False).q)),
+        compiler_options=FAST_COMPILE,
+    )
     D = jac(T.astype(np.float32), q0.astype(np.float32))  # (n, 6, 4, 4)
     assert D.dtype == jnp.float32 and D.shape == (n, 6, 4, 4)
     T_dot = T[:, None] @ GENERATORS[None]  # (n, 6 directions, 4, 4)
