@@ -5,8 +5,10 @@ Oracles: ``jk.fk`` (the forward kinematics, not the solver's Jacobian pass) at t
 configuration; unit quaternions; ``jk.difference`` for the posture; for the implicit-function
 derivative, that the frames follow the target's tangent (``d fk(q*(T)) = dT``).
 
-Compiles: one Solo12 solve (four feet, a batch of 50, module fixture) and a few solves of
-``LEGS``, a small free-floating robot with ball hips (one compile per task shape).
+Compiles: one Solo12 solve (four feet, a batch of 50, cached) and two solves of ``LEGS``, a small
+free-floating robot with ball hips: every float64 batch goes through one jitted JVP of the solve
+(weights, centre of mass and posture as data, the tangent along with the solution), and one
+float32 solve of a single frame. Helpers (batched ``fk``) are jitted once per robot.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _legs import FEET, LEGS
-from _xla import FAST_COMPILE
+from _xla import FAST_COMPILE, sampler
 
 import jaxkin as jk
 from jaxkin.ik import RESULTS
@@ -35,12 +37,25 @@ def quaternion_norms(robot: jk.Robot, qs) -> np.ndarray:
     return np.stack(out, axis=-1)
 
 
+@functools.cache
+def _fk_batch(robot: jk.Robot, frames: tuple):
+    """One compiled ``vmap`` of ``jk.fk`` per robot and frames (op by op, a Solo12 pass under
+    ``vmap`` dispatches hundreds of primitives)."""
+    fk = jax.vmap(lambda q: jk.fk(robot, q, frame=list(frames)))
+    return jax.jit(fk, compiler_options=FAST_COMPILE)
+
+
 def fk_frames(robot, qs, frames):
-    return np.asarray(jax.vmap(lambda q: jk.fk(robot, q, frame=frames))(jnp.asarray(qs)))
+    return np.asarray(_fk_batch(robot, tuple(frames))(jnp.asarray(qs)))
+
+
+def centres_of_mass(qs) -> np.ndarray:
+    """``jk.center_of_mass`` of LEGS at each row (its eager kernel: one compile)."""
+    return np.stack([np.asarray(jk.center_of_mass(LEGS, q)) for q in np.asarray(qs)])
 
 
 def targets(robot, n, key, frames):
-    qs = jk.sample_configurations(robot, n, key=key)
+    qs = sampler(robot, n)(jax.random.key(key))
     return fk_frames(robot, qs, frames)
 
 
@@ -95,39 +110,52 @@ N = 12
 def legs_case():
     """A batch of two-feet targets of LEGS (the feet and the centre of mass of random
     configurations) and a posture."""
-    qs = jk.sample_configurations(LEGS, N, key=3)
+    qs, q_ref = legs_draw()[:N], legs_draw()[N]
     T = fk_frames(LEGS, qs, FEET)
-    com = np.asarray(jax.vmap(lambda q: jk.center_of_mass(LEGS, q))(qs))
-    q_ref = np.asarray(jk.sample_configurations(LEGS, 1, key=9))[0]
+    com = centres_of_mass(qs)
     return T, com, q_ref
 
 
+@functools.cache
+def legs_draw() -> np.ndarray:
+    """N + 2 random configurations of LEGS from one draw (one compile of the sampler): the N
+    targets' configurations, the posture, and the float32 test's configuration."""
+    return np.asarray(sampler(LEGS, N + 2)(jax.random.key(3)))
+
+
 @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
-def _solve_legs(T, com, q_ref, weights, com_weight, posture_weight):
-    return jk.solve_ik(
-        LEGS,
-        T,
-        jk.neutral(LEGS),
-        frame=FEET,
-        weights=weights,
-        com=com,
-        com_weight=com_weight,
-        posture=q_ref,
-        posture_weight=posture_weight,
-        throw=False,
-    )
+def _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight):
+    def solve(T):
+        return jk.solve_ik(
+            LEGS,
+            T,
+            jk.neutral(LEGS),
+            frame=FEET,
+            weights=weights,
+            com=com,
+            com_weight=com_weight,
+            posture=q_ref,
+            posture_weight=posture_weight,
+            throw=False,
+        )
+
+    return jax.jvp(solve, (T,), (T_dot,))
 
 
-def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0):
+def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0, T_dot=None):
     """Every LEGS batch solve: the centre-of-mass target and the posture term are always there,
-    with weight 0 unless asked for (the weights are data: one compile serves them all)."""
+    with weight 0 unless asked for (the weights are data: one compile serves them all), and the
+    solution's tangent along ``T_dot`` (default 0) comes with it: ``(solution, dq)``."""
     _, com, q_ref = legs_case()
-    return _solve_legs(T, com, q_ref, np.broadcast_to(weights, (2, 6)), com_weight, posture_weight)
+    T_dot = np.zeros_like(T) if T_dot is None else T_dot
+    weights = np.broadcast_to(weights, (2, 6))
+    sol, dsol = _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight)
+    return sol, dsol.q
 
 
 def test_ball_joints_and_a_floating_base_converge_with_unit_quaternions():
     T = legs_case()[0]
-    sol = solve_legs(T)
+    sol, _ = solve_legs(T)
     assert np.all(sol.converged)
     assert sol.q.shape == (N, LEGS.nq) and sol.position_error.shape == (N, 2)
     Tq = fk_frames(LEGS, sol.q, FEET)
@@ -140,14 +168,14 @@ def test_ball_joints_and_a_floating_base_converge_with_unit_quaternions():
 def test_position_only_and_orientation_only_rows():
     T = legs_case()[0]
     position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
-    sol = solve_legs(T, weights=position)
+    sol, _ = solve_legs(T, weights=position)
     assert np.all(sol.converged)
     Tq = fk_frames(LEGS, sol.q, FEET)
     np.testing.assert_allclose(Tq[..., :3, 3], T[..., :3, 3], atol=1e-9)
     assert np.all(sol.orientation_error == 0.0)  # rows with weight 0 are no target
     # left foot: orientation only; right foot: its pose, position rows weighted 10
     mixed = np.array([[0.0, 0, 0, 1, 1, 1], [10.0, 10, 10, 1, 1, 1]])
-    sol = solve_legs(T, weights=mixed)
+    sol, _ = solve_legs(T, weights=mixed)
     assert np.all(sol.converged)
     Tq = fk_frames(LEGS, sol.q, FEET)
     np.testing.assert_allclose(Tq[:, 0, :3, :3], T[:, 0, :3, :3], atol=1e-9)
@@ -158,16 +186,16 @@ def test_position_only_and_orientation_only_rows():
 def test_posture_pulls_toward_the_reference_without_stopping_the_targets():
     T, _, q_ref = legs_case()
     position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
-    free = solve_legs(T, weights=position)
-    pulled = solve_legs(T, weights=position, posture_weight=1.0)
+    free, _ = solve_legs(T, weights=position)
+    pulled, _ = solve_legs(T, weights=position, posture_weight=1.0)
     assert np.all(free.converged) and np.all(pulled.converged)
     np.testing.assert_allclose(
         fk_frames(LEGS, pulled.q, FEET)[..., :3, 3], T[..., :3, 3], atol=1e-9
     )
 
     def gap(qs):  # the joints' distance to the posture (the base is not pulled)
-        d = jax.vmap(lambda q: jk.difference(LEGS, q, q_ref))(jnp.asarray(qs))
-        return np.linalg.norm(np.asarray(d)[:, 6:], axis=1)
+        d = np.stack([np.asarray(jk.difference(LEGS, q, q_ref)) for q in np.asarray(qs)])
+        return np.linalg.norm(d[:, 6:], axis=1)
 
     assert np.mean(gap(pulled.q)) < 0.7 * np.mean(gap(free.q))
 
@@ -175,10 +203,10 @@ def test_posture_pulls_toward_the_reference_without_stopping_the_targets():
 def test_centre_of_mass_target_with_the_feet_positions():
     T, com, _ = legs_case()
     position = np.array([[1.0, 1, 1, 0, 0, 0], [1.0, 1, 1, 0, 0, 0]])
-    sol = solve_legs(T, weights=position, com_weight=1.0)
+    sol, _ = solve_legs(T, weights=position, com_weight=1.0)
     assert np.all(sol.converged) and sol.com_error.shape == (N,)
     assert np.all(sol.com_error < 1e-10)
-    c = np.asarray(jax.vmap(lambda q: jk.center_of_mass(LEGS, q))(sol.q))
+    c = centres_of_mass(sol.q)
     np.testing.assert_allclose(c, com, atol=1e-10)
     np.testing.assert_allclose(fk_frames(LEGS, sol.q, FEET)[..., :3, 3], T[..., :3, 3], atol=1e-9)
 
@@ -205,7 +233,7 @@ def test_refusals_name_the_argument():
 # ----------------------------------------------------------------------------- float32, one frame
 def test_float32_single_frame_of_a_floating_robot():
     robot = LEGS.astype(np.float32)
-    q = np.asarray(jk.sample_configurations(robot, 1, key=5))[0]
+    q = legs_draw()[N + 1].astype(np.float32)
     T = np.asarray(jk.fk(robot, q, frame="l_foot"))
     solve = jax.jit(
         lambda T: jk.solve_ik(robot, T, jk.neutral(robot), frame="l_foot", throw=False),
@@ -222,22 +250,30 @@ def test_float32_single_frame_of_a_floating_robot():
 # ----------------------------------------------------------------------------- derivatives
 def test_implicit_derivative_moves_the_frames_with_their_targets():
     """``d fk(q*(T)) / dT = dT``: the tangent of the solution moves both feet exactly as their
-    targets move (12 rows, 14 velocity columns: full row rank)."""
+    targets move (12 rows, 14 velocity columns: full row rank), for every target of the batch
+    (the shared LEGS solve: centre-of-mass rows and posture there with weight 0, which are no
+    part of the residual the derivative follows)."""
     T = legs_case()[0]
-    T = T[0]
     rng = np.random.default_rng(0)
-    xi = rng.normal(size=(2, 6))
-    hat = np.zeros((2, 4, 4))
-    for i, (x, y, z) in enumerate(xi[:, 3:]):
-        hat[i, :3, :3] = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
-    hat[:, :3, 3] = xi[:, :3]
+    xi = rng.normal(size=(N, 2, 6))
+    hat = np.zeros((N, 2, 4, 4))
+    x, y, z = np.moveaxis(xi[..., 3:], -1, 0)
+    hat[..., 0, 1], hat[..., 0, 2], hat[..., 1, 2] = -z, y, -x
+    hat[..., 1, 0], hat[..., 2, 0], hat[..., 2, 1] = z, -y, x
+    hat[..., :3, 3] = xi[..., :3]
     T_dot = T @ hat  # tangents of the targets (body-frame twists)
-
-    def q_star(T):
-        return jk.solve_ik(LEGS, T, jk.neutral(LEGS), frame=FEET, throw=False).q
-
-    jvp = jax.jit(lambda T, Td: jax.jvp(q_star, (T,), (Td,)), compiler_options=FAST_COMPILE)
-    q, dq = jvp(jnp.asarray(T), jnp.asarray(T_dot))
-    np.testing.assert_allclose(fk_frames(LEGS, q[None], FEET)[0], T, atol=1e-9)
-    _, dT = jax.jvp(lambda q: jk.fk(LEGS, q, frame=FEET), (q,), (dq,))
+    sol, dq = solve_legs(T, T_dot=T_dot)
+    assert np.all(sol.converged)
+    np.testing.assert_allclose(fk_frames(LEGS, sol.q, FEET), T, atol=1e-9)
+    dT = _fk_tangents(jnp.asarray(sol.q), jnp.asarray(dq))
     np.testing.assert_allclose(dT, T_dot, atol=1e-8)
+
+
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+def _fk_tangents(qs, dqs):
+    """``d fk(q) [dq]`` of both feet, (N, 2, 4, 4): forward-mode through ``jk.fk``."""
+
+    def one(q, dq):
+        return jax.jvp(lambda q: jk.fk(LEGS, q, frame=FEET), (q,), (dq,))[1]
+
+    return jax.vmap(one)(qs, dqs)
