@@ -6,19 +6,21 @@ the answer is checked with ``jk.fk`` again (not the solver's Jacobian pass); the
 compared with :func:`jaxkin.motion.track_step` called in a Python loop, and the chunked run (to
 disk) with the unchunked one; ``chunked_scan`` itself against ``lax.scan``.
 
-Compiles: the small free-floating ``LEGS`` robot (three times: unchunked, chunked, one step) and
-the zoo's Panda (float64 and float32).
+Compiles: the small free-floating ``LEGS`` robot twice (the scan over chunks of 15 steps, every
+LEGS run's chunk length, and one step) and the zoo's Panda (float64 and float32).
 """
 
 from __future__ import annotations
 
 import functools
+import types
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from _legs import FEET, LEGS
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 from jaxkin import motion
@@ -34,37 +36,57 @@ def smooth_trajectory(robot: jk.Robot, q0, n: int, seed: int, scale: float = 0.3
     t = np.linspace(0.0, 1.5, n)
     V = np.random.default_rng(seed).normal(size=(4, robot.nv))
     vel = jnp.asarray(np.sin(np.outer(t, [1.0, 2.0, 3.0, 4.0])) @ V * scale, robot.dtype)
-    lo, hi = robot.lower, robot.upper
-    qs = jax.jit(jax.vmap(lambda v: jnp.clip(jk.integrate(robot, q0, v), lo, hi)))(vel)
+    qs = kernels(robot).integrate(jnp.asarray(q0, robot.dtype), vel)
     return qs, max_step(robot, qs)
+
+
+@functools.cache
+def kernels(robot: jk.Robot) -> types.SimpleNamespace:
+    """The test's batched helpers for one robot, each jitted once (a fresh ``jax.jit`` per call
+    would trace and lower again)."""
+    lo, hi = robot.lower, robot.upper
+    integrate = jax.vmap(lambda q0, v: jnp.clip(jk.integrate(robot, q0, v), lo, hi), (None, 0))
+    jit = functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+    return types.SimpleNamespace(
+        integrate=jit(integrate),
+        gaps=jit(jax.vmap(lambda a, b: jk.difference(robot, a, b))),
+        fk=jit(jax.vmap(lambda q: jk.fk(robot, q))),
+        fk_frames=jit(jax.vmap(lambda q: jk.fk(robot, q, frame=FEET))),
+    )
 
 
 def max_step(robot: jk.Robot, qs) -> float:
     """The largest entry of ``difference(q_t, q_{t+1})`` over a sequence (n, nq)."""
     qs = jnp.asarray(qs)
-    gaps = jax.jit(jax.vmap(lambda a, b: jk.difference(robot, a, b)))(qs[:-1], qs[1:])
-    return float(jnp.max(jnp.abs(gaps)))
+    return float(jnp.max(jnp.abs(kernels(robot).gaps(qs[:-1], qs[1:]))))
 
 
 def fk_frames(robot, qs, frames):
-    return np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q, frame=frames)))(jnp.asarray(qs)))
+    assert list(frames) == FEET
+    return np.asarray(kernels(robot).fk_frames(jnp.asarray(qs)))
 
 
 def fk_tip(robot, qs):
-    return np.asarray(jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(jnp.asarray(qs)))
+    return np.asarray(kernels(robot).fk(jnp.asarray(qs)))
 
 
 def max_pose_error(Ta, Tb):
     return max(np.max(np.abs(Ta[..., :3, 3] - Tb[..., :3, 3])), np.max(np.abs(Ta - Tb)))
 
 
+CHUNK = 15
+
+
 @functools.cache
 def legs_case():
+    """The LEGS sequence, retargeted in four chunks of ``CHUNK`` steps: every LEGS run of this
+    file has chunks of that length (one compiled scan, loaded from the run's compilation cache
+    after the first)."""
     q0 = jk.neutral(LEGS).at[np.array([11, 16])].set(0.6)  # knees bent: away from singular
     qs, gap = smooth_trajectory(LEGS, q0, STEPS, seed=1)
     frames = FEET  # 12 rows, 14 velocities: redundant
     T = fk_frames(LEGS, qs, frames)
-    res = motion.retarget(LEGS, T, qs[0], frames)
+    res = motion.retarget(LEGS, T, qs[0], frames, chunk_size=CHUNK)
     return qs, gap, frames, T, res
 
 
@@ -85,9 +107,11 @@ def test_floating_base_sequence_is_tracked_and_smooth():
 
 
 def test_scan_equals_solving_step_by_step():
+    """Every step of the chunked scan, across the chunks' boundaries (the carry), against
+    track_step called in a loop."""
     qs, _, frames, T, res = legs_case()
     q = qs[0]
-    for t in range(8):
+    for t in range(STEPS):
         step = motion.track_step(LEGS, q, T[t], frames)
         np.testing.assert_allclose(step.q, res.q[t], rtol=0, atol=1e-12)
         assert float(step.residual) == pytest.approx(float(res.residual[t]), abs=1e-12)
@@ -96,7 +120,13 @@ def test_scan_equals_solving_step_by_step():
 
 
 def test_chunked_run_equals_the_unchunked_one_and_writes_to_disk(tmp_path):
+    """The first chunk's steps run alone (one chunk: unchunked), and the whole sequence in
+    chunks of 16 (four of 15 rows) written to disk, against the chunked run in memory (which
+    equals the step-by-step loop above)."""
     qs, _, frames, T, res = legs_case()
+    alone = motion.retarget(LEGS, T[:CHUNK], qs[0], frames)
+    np.testing.assert_allclose(alone.q, res.q[:CHUNK], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(alone.result, res.result[:CHUNK])
     path = motion.retarget(LEGS, T, qs[0], frames, chunk_size=16, out=tmp_path / "motion.npz")
     assert str(path).endswith("motion.npz")
     with np.load(path) as saved:
