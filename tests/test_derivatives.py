@@ -15,6 +15,7 @@ and central finite differences.
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import jax
@@ -62,10 +63,10 @@ def _jdot_kernel(robot: jk.Robot, qs, qds):
         for f in compared_frames(robot):
             for ref in REFERENCES:
                 out[f"Jd/{f}/{ref}"] = jk.jacobian_dot(robot, q, qd, frame=f, reference=ref)
+        steps = jnp.stack([q + H * qd, q - H * qd])  # one traced Jacobian for both steps
         for ref in REFERENCES:
             out[f"Jdqd/{ref}"] = jk.jacobian_dot_qd(robot, q, qd, reference=ref)
-            Jp = jk.geometric_jacobian(robot, q + H * qd, reference=ref)
-            Jm = jk.geometric_jacobian(robot, q - H * qd, reference=ref)
+            Jp, Jm = jax.vmap(lambda x, r=ref: jk.geometric_jacobian(robot, x, reference=r))(steps)
             out[f"fd_Jd/{ref}"] = (Jp - Jm) / (2 * H)
             out[f"Jdtip/{ref}"] = out[f"Jd/{robot.frame_names[-1]}/{ref}"]
         out["Ts"] = jk.fk_all(robot, q)
@@ -94,6 +95,7 @@ def _hessian_kernel(robot: jk.Robot, qs):
             )
         )(eye)
         out["Htip"] = jk.kinematic_hessian(robot, q)
+        out["Jtip"] = jk.geometric_jacobian(robot, q)  # for the closed form of Haviland & Corke
         return out
 
     return jax.vmap(one)(qs)
@@ -104,6 +106,7 @@ def _analytical_kernel(robot: jk.Robot, qs, qds):
 
     def one(q, qd):
         out = {}
+        steps = jnp.stack([q + H * qd, q - H * qd])  # one traced Jacobian for both steps
         for rep in REPRESENTATIONS:
             Jad, margin = jk.analytical_jacobian_dot(robot, q, qd, rep, return_margin=True)
             out[f"Jad/{rep}"] = Jad
@@ -112,8 +115,9 @@ def _analytical_kernel(robot: jk.Robot, qs, qds):
                 out[f"Jadqd/{rep}"] = jk.analytical_jacobian_dot_qd(
                     robot, q, qd, rep, return_margin=True
                 )[0]
-            Jap = jk.analytical_jacobian(robot, q + H * qd, rep, return_margin=True)[0]
-            Jam = jk.analytical_jacobian(robot, q - H * qd, rep, return_margin=True)[0]
+            Jap, Jam = jax.vmap(
+                lambda x, r=rep: jk.analytical_jacobian(robot, x, r, return_margin=True)[0]
+            )(steps)
             out[f"fd_Jad/{rep}"] = (Jap - Jam) / (2 * H)
         return out
 
@@ -126,9 +130,9 @@ _hessian_kernel = jax.jit(_hessian_kernel, static_argnums=0, compiler_options=FA
 _analytical_kernel = jax.jit(_analytical_kernel, static_argnums=0, compiler_options=FAST_COMPILE)
 
 
-@pytest.fixture(scope="module", params=["panda", "niryo_one"])
-def case(request):
-    name = request.param
+@functools.cache
+def computed(name: str):
+    """Everything jaxkin computes for ``name`` (three compiled kernels), shared by the tests."""
     robot = jk.robots.load(name, dtype=np.float64)
     xml = niryo_urdf() if name == "niryo_one" else modified_dh_urdf(robot)
     model = pin.buildModelFromXML(xml)
@@ -143,6 +147,11 @@ def case(request):
     out = jax.tree_util.tree_map(np.asarray, out)
     reach = max(1.0, float(np.max(np.linalg.norm(out["Ts"][..., :3, 3], axis=-1))))
     return name, robot, model, qs, qds, out, reach
+
+
+@pytest.fixture(scope="module", params=["panda", "niryo_one"])
+def case(request):
+    return computed(request.param)
 
 
 def test_jacobian_dot_matches_pinocchio_in_every_reference(case):
@@ -226,15 +235,10 @@ def test_hessian_matches_robotics_toolbox_and_closed_form():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         rtb = pytest.importorskip("roboticstoolbox")
-    robot = jk.robots.load("panda", dtype=np.float64)
+    _, robot, _, qs, _, out, _ = computed("panda")  # the Panda's kernels, compiled once
     model = rtb.models.DH.Panda()
     model.tool = np.asarray(robot.tool)  # the zoo's TCP (Franka: 0.1034 m; RTB: 0.103 m)
-    qs = sample_configurations(robot, 5, 4)
-    Hs, Js = jax.jit(
-        jax.vmap(lambda q: (jk.kinematic_hessian(robot, q), jk.geometric_jacobian(robot, q))),
-        compiler_options=FAST_COMPILE,
-    )(jnp.asarray(qs))
-    for q, H, J in zip(qs, np.asarray(Hs), np.asarray(Js), strict=True):
+    for q, H, J in zip(qs[:5], out["Htip"][:5], out["Jtip"][:5], strict=True):
         np.testing.assert_allclose(H, model.hessian0(q), rtol=0, atol=1e-12)
         # Haviland & Corke: H[k, :3, j] = z_a x Jv_b (a = min, b = max); H[k, 3:, j] = z_k x z_j
         z = J[3:]

@@ -32,6 +32,7 @@ from _urdf_support import FULL_CORPUS
 from _xla import FAST_COMPILE
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_com import random_q  # numpy: no sampler compiled per (n, nq); the sampler is tested below
 
 import jaxkin as jk
 from jaxkin.robots import example_robot_data as erd
@@ -120,7 +121,7 @@ def floating_case(name: str):
     robot = jk.robots.load(name, floating_base=True, dtype=np.float64)
     model = pin.buildModelFromUrdf(str(erd.path(name)), pin.JointModelFreeFlyer())
     pmap = PinMap(robot, model)
-    qs = np.asarray(jk.sample_configurations(robot, N, key=7))
+    qs = random_q(robot, N, seed=7)
     vs = np.random.default_rng(7).uniform(-1.0, 1.0, (N, robot.nv))
     frames = _frames(robot)
     foot = robot.default_frames[0]  # a branch end
@@ -223,7 +224,7 @@ URDF = """<robot name="mixed">
 def urdf_case():
     robot = jk.load_urdf(URDF, dtype=np.float64)
     model = pin.buildModelFromXML(URDF)
-    qs = np.asarray(jk.sample_configurations(robot, N, key=3))
+    qs = random_q(robot, N, seed=3)
     vs = np.random.default_rng(3).uniform(-2.0, 2.0, (N, robot.nv))
 
     def one(q, v):
@@ -377,7 +378,7 @@ def test_sampled_configurations_lie_on_the_manifold():
 
 
 def test_analytical_jacobian_and_hessian_work_along_the_tangent():
-    q = np.asarray(jk.sample_configurations(ROBOT, 1, key=5))[0]
+    q = random_q(ROBOT, 1, seed=5)[0]
     v = np.linspace(-1.0, 1.0, ROBOT.nv)
 
     @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
@@ -433,7 +434,7 @@ def test_zero_or_nonfinite_quaternions_raise_eagerly_and_give_nan_under_jit():
     head = jax.jit(lambda q: jk.fk(ROBOT, q, frame="head"))(bad)
     assert np.all(np.isnan(np.asarray(head)[:3, :3]))  # the ball joint's rotation
     # a non-unit quaternion is the rotation of its unit multiple, as in MuJoCo
-    q = np.asarray(jk.sample_configurations(ROBOT, 1, key=2))[0]
+    q = random_q(ROBOT, 1, seed=2)[0]
     scaled = q.copy()
     scaled[3:7] *= 3.0
     scaled[7:11] *= 0.2

@@ -44,11 +44,18 @@ def jacobians_and_twists(draw):
     return J, v
 
 
+# The properties draw J of up to 48 shapes: one small compiled program per shape costs less than
+# compiling each primitive of the solve per shape op by op (the eager call); finite inputs only,
+# so the eager refusals are not in play (they are tested in test_errors and test_nonfinite.py).
+_dls = jax.jit(lambda J, v, lam: jk.damped_least_squares(J, v, damping=lam))
+_adaptive = jax.jit(lambda J: jk.adaptive_damping(J, max_damping=0.1, threshold=0.3))
+
+
 @settings(max_examples=25)
 @given(jacobians_and_twists(), st.floats(1e-3, 10.0, **_FINITE))
 def test_property_dls_bound(Jv, lam):
     J, v = Jv
-    qd = np.asarray(jk.damped_least_squares(J, v, damping=lam))
+    qd = np.asarray(_dls(J, v, lam))
     assert np.all(np.isfinite(qd))
     bound = np.linalg.norm(v) / (2 * lam)
     assert np.linalg.norm(qd) <= bound * (1 + 1e-9) + 1e-300
@@ -62,8 +69,8 @@ def test_property_dls_bound(Jv, lam):
 @given(jacobians_and_twists())
 def test_property_adaptive_damping_bound(Jv):
     J, v = Jv
-    eps, lam_max = 0.3, 0.1
-    lam = float(jk.adaptive_damping(J, max_damping=lam_max, threshold=eps))
+    eps, lam_max = 0.3, 0.1  # those of _adaptive
+    lam = float(_adaptive(J))
     s = np.linalg.svd(J, compute_uv=False)
     smin = s[-1] if J.shape[0] <= J.shape[1] else 0.0
     assert 0.0 <= lam <= lam_max
@@ -72,7 +79,7 @@ def test_property_adaptive_damping_bound(Jv):
     else:
         assert lam == pytest.approx(lam_max * math.sqrt(1 - (smin / eps) ** 2), rel=1e-10)
     if lam > 0:
-        qd = np.asarray(jk.damped_least_squares(J, v, damping=lam))
+        qd = np.asarray(_dls(J, v, lam))
         assert np.linalg.norm(qd) <= np.linalg.norm(v) / (2 * lam) * (1 + 1e-9) + 1e-300
 
 
@@ -130,14 +137,17 @@ def test_dls_smooth_and_finite_at_exact_singularity():
         return jnp.sum(jk.damped_least_squares(J, v, damping=lam) ** 2)
 
     q0 = jnp.zeros(2)  # stretched
-    g_q, g_lam = jax.grad(speed, argnums=(0, 1))(q0, 0.1)
+    # compiled: one small program each (op by op, every primitive of the backward pass compiles)
+    g_q, g_lam = jax.jit(jax.grad(speed, argnums=(0, 1)))(q0, 0.1)
     assert np.all(np.isfinite(np.asarray(g_q))) and np.isfinite(float(g_lam))
     qd = jk.damped_least_squares(jk.geometric_jacobian(planar, q0), v, damping=0.1)
     assert float(jnp.linalg.norm(qd)) <= 1.0 / 0.2
     # adaptive damping is differentiable too (the sqrt is double-where guarded)
-    g = jax.grad(
-        lambda q: jk.adaptive_damping(
-            jk.geometric_jacobian(planar, q)[:2], max_damping=0.1, threshold=0.5
+    g = jax.jit(
+        jax.grad(
+            lambda q: jk.adaptive_damping(
+                jk.geometric_jacobian(planar, q)[:2], max_damping=0.1, threshold=0.5
+            )
         )
     )(q0)
     assert np.all(np.isfinite(np.asarray(g)))

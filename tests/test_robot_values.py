@@ -92,6 +92,13 @@ def _reach(robot, q):
     return np.asarray(jk.fk(robot, q))
 
 
+def _path(robot, qs):
+    """The tip's pose at each configuration: eager ``jk.fk`` calls, which share the kernel
+    compiled once per robot value with :func:`_reach` (a ``jax.vmap`` outside ``jit`` would
+    dispatch, and compile, every primitive of the batched kernel op by op)."""
+    return np.stack([_reach(robot, q) for q in qs])
+
+
 def test_solve_ik_answers_for_the_robot_it_is_given():
     robot = _niryo()
     q_star = np.array([0.3, -0.4, 0.5, 0.2, -0.6, 0.1])
@@ -110,10 +117,10 @@ def test_resolved_rate_control_answers_for_the_robot_it_is_given():
     robot = _niryo()
     q0 = np.array([0.1, -0.3, 0.4, 0.0, 0.5, 0.0])
     qs = q0 + np.linspace(0, 0.2, 20)[:, None] * np.array([1, 0.5, -0.5, 0.3, 0.2, 0.1])
-    path = jax.vmap(lambda q: jk.fk(robot, q))(jnp.asarray(qs))
+    path = _path(robot, qs)
     out = jk.resolved_rate_control(robot, q0, path, 0.01)
     longer = _longer(robot, dx=0.02)
-    path2 = jax.vmap(lambda q: jk.fk(longer, q))(jnp.asarray(qs))
+    path2 = _path(longer, qs)
     out2 = jk.resolved_rate_control(longer, q0, path2, 0.01)
     assert float(out.max_position_error) < 1e-3 and float(out2.max_position_error) < 1e-3
     # the second run moved the longer arm along its path; the old arm at those joints is elsewhere
@@ -124,8 +131,9 @@ def test_resolved_rate_control_answers_for_the_robot_it_is_given():
 
 def test_calibrate_answers_for_the_robot_it_is_given():
     truth = _niryo()
-    qs = np.asarray(jk.sample_configurations(truth, 40, 3, dtype=np.float64))
-    Ts = jax.vmap(lambda q: jk.fk(truth, q))(jnp.asarray(qs))
+    # within the limits, drawn by numpy (nothing to compile; the sampler is not under test)
+    qs = np.random.default_rng(3).uniform(np.asarray(truth.lower), np.asarray(truth.upper), (40, 6))
+    Ts = _path(truth, qs)
     masks = {"xyz": np.zeros((8, 3), bool)}
     masks["xyz"][3, 0] = True
     start = _longer(truth, dx=0.01)
