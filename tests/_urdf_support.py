@@ -79,7 +79,10 @@ def oracle_case(key: str, frames: str = "all") -> Case:
     """Load ``key`` in float64 and evaluate, at N_CONFIGS random configurations (fixed seed):
     ``fk_all``, the geometric Jacobian of every frame in every reference (``frames="all"``), and
     the world_aligned point Jacobian at POINT of :func:`point_frames` (keys ``"<frame>/point"``).
-    Cached: the Pinocchio and MuJoCo tests share one compile per robot."""
+    The frames' Jacobians come from one multi-frame call per reference (``frame=[...]``, which
+    test_multi_frame.py shows equal to stacked single-frame calls bit for bit); the point
+    Jacobians from single-frame calls. Cached: the Pinocchio and MuJoCo tests share one compile
+    per robot."""
     path = case_path(key)
     robot = jk.load_urdf(path, dtype=np.float64)
     urdf = parse_urdf(path)
@@ -89,10 +92,10 @@ def oracle_case(key: str, frames: str = "all") -> Case:
 
     def one(q):
         out = {"Ts": jk.fk_all(robot, q)}
-        for f in names:
-            for ref in REFERENCES:
-                out[f"{f}/{ref}"] = jk.geometric_jacobian(robot, q, frame=f, reference=ref)
-        for f in pf:
+        for ref in REFERENCES if names else ():  # every frame in one multi-frame pass
+            Js = jk.geometric_jacobian(robot, q, frame=names, reference=ref)
+            out.update({f"{f}/{ref}": Js[i] for i, f in enumerate(names)})
+        for f in pf:  # single-frame calls
             out[f"{f}/point"] = jk.geometric_jacobian(robot, q, frame=f, point=POINT)
         return out
 
