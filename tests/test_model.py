@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _xla import op_by_op
+from _xla import FAST_COMPILE, op_by_op
 from hypothesis import given
 
 import jaxkin as jk
@@ -39,14 +39,16 @@ def _all_outputs(robot, q):
 
 def test_jit_equals_eager(robot):
     eager = _all_outputs(robot, Q)
-    jitted = jax.jit(_all_outputs)(robot, Q)
+    # the robot traced: the kernels over traced parameters (not the eager ones, constants folded)
+    jitted = jax.jit(_all_outputs, compiler_options=FAST_COMPILE)(robot, Q)
     for a, b in zip(eager, jitted, strict=True):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-13)
 
 
 def test_vmap_over_configurations_equals_loop(robot):
-    qs = jnp.asarray(np.random.default_rng(0).uniform(-1, 1, size=(17, 4)))
-    batched = jax.vmap(lambda q: _all_outputs(robot, q))(qs)
+    qs = np.random.default_rng(0).uniform(-1, 1, size=(17, 4))
+    # one compiled program for the batch (eagerly, vmap runs a hundred primitives op by op)
+    batched = jax.jit(jax.vmap(lambda q: _all_outputs(robot, q)), compiler_options=FAST_COMPILE)(qs)
     for i in range(qs.shape[0]):
         single = _all_outputs(robot, qs[i])
         for a, b in zip(batched, single, strict=True):
@@ -63,10 +65,10 @@ def test_vmap_over_a_stack_of_robots(robot):
     ]
     stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *robots)
     Js = jax.vmap(lambda r: jk.geometric_jacobian(r, Q))(stacked)
-    for i, r in enumerate(robots):
-        np.testing.assert_allclose(
-            np.asarray(Js[i]), np.asarray(jk.geometric_jacobian(r, Q)), rtol=0, atol=1e-13
-        )
+    with jax.disable_jit():  # each robot used once: op by op, not one compiled kernel per robot
+        expected = [np.asarray(jk.geometric_jacobian(r, Q)) for r in robots]
+    for i in range(len(robots)):
+        np.testing.assert_allclose(np.asarray(Js[i]), expected[i], rtol=0, atol=1e-13)
 
 
 def test_grad_with_respect_to_dh_parameters_matches_finite_differences(robot):
@@ -79,7 +81,8 @@ def test_grad_with_respect_to_dh_parameters_matches_finite_differences(robot):
 
     g = jax.grad(loss)(robot)
     h = 1e-6
-    loss_of = jax.jit(loss)  # the robot traced: one compile for every perturbed robot
+    # the robot traced: one compile for every perturbed robot
+    loss_of = jax.jit(loss, compiler_options=FAST_COMPILE)
     for key in ("a", "alpha", "d", "theta"):
         assert g.params[key].shape == robot.params[key].shape
         for i in range(robot.n_joints):
@@ -89,7 +92,7 @@ def test_grad_with_respect_to_dh_parameters_matches_finite_differences(robot):
             fd = (loss_of(plus) - loss_of(minus)) / (2 * h)
             assert abs(float(g.params[key][i]) - float(fd)) < 1e-7, (key, i)
     # jacfwd with respect to the parameters works as well (forward mode)
-    dT = jax.jacfwd(lambda r: jk.fk(r, Q))(robot)
+    dT = jax.jit(jax.jacfwd(lambda r: jk.fk(r, Q)), compiler_options=FAST_COMPILE)(robot)
     assert dT.params["a"].shape == (4, 4, robot.n_joints)
     # and with respect to base and tool
     assert np.all(np.isfinite(np.asarray(g.base))) and np.all(np.isfinite(np.asarray(g.tool)))
@@ -104,7 +107,7 @@ def test_grad_with_respect_to_placement_parameters():
 
     g = jax.grad(f)(robot)
     h = 1e-6
-    f_of = jax.jit(f)  # the robot traced: one compile for every perturbed robot
+    f_of = jax.jit(f, compiler_options=FAST_COMPILE)  # robot traced: one compile for all
     for key in ("xyz", "rpy"):
         for j in range(robot.n_joints):
             for k in range(3):
@@ -118,7 +121,7 @@ def test_grad_with_respect_to_placement_parameters():
 def test_new_parameter_values_never_retrace(robot):
     traces = []
 
-    @jax.jit
+    @jax.jit(compiler_options=FAST_COMPILE)
     def jac(r, q):
         traces.append(1)
         return jk.geometric_jacobian(r, q)
@@ -157,8 +160,12 @@ def test_float32_within_float32_tolerance(robot_q):
     eps32 = np.finfo(np.float32).eps
     tol = 4 * eps32 * (1 + float(np.max(np.abs(q)))) * reach * robot32.dof * 4
     np.testing.assert_allclose(np.asarray(J32), J64, rtol=0, atol=tol)
-    # hand-built vs autodiff within float32 (tests/README.md: 1e-6 scaled by reach)
-    Jf = np.asarray(jk.jacobian_fwd(robot32, q32))
+    # hand-built vs autodiff within float32 (tests/README.md: 1e-6 scaled by reach). jacfwd is
+    # compiled (one kernel for this robot): op by op, its vmap over the dof compiles every
+    # primitive again for each new dof (about 20 per dof), several times the cost of one kernel.
+    with jax.disable_jit(False):
+        jacobian_fwd = jax.jit(lambda q: jk.jacobian_fwd(robot32, q), compiler_options=FAST_COMPILE)
+        Jf = np.asarray(jacobian_fwd(q32))
     np.testing.assert_allclose(np.asarray(J32), Jf, rtol=0, atol=1e-6 * reach * robot32.dof)
 
 
