@@ -11,6 +11,7 @@ transform too; unidentifiable choices are refused with the parameters named.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -18,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _sampling import sample_configurations
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 from jaxkin import spatial
@@ -28,7 +30,15 @@ M = 100
 
 
 def _measure(robot: jk.Robot, qs: np.ndarray, noise: np.ndarray | None) -> jax.Array:
-    Ts = jax.vmap(lambda q: jk.fk(robot, q))(jnp.asarray(qs))
+    """Poses of ``robot`` at ``qs``, perturbed by ``noise`` (M, 6) (standard normal draws scaled
+    by SIGMA_P and SIGMA_O), or exact for None: one compiled program per robot (the robot a
+    constant of it), not hundreds of primitives dispatched op by op."""
+    return _measure_kernel(robot, jnp.asarray(qs), None if noise is None else jnp.asarray(noise))
+
+
+@functools.partial(jax.jit, static_argnums=0, compiler_options=FAST_COMPILE)
+def _measure_kernel(robot: jk.Robot, qs: jax.Array, noise: jax.Array | None) -> jax.Array:
+    Ts = jax.vmap(lambda q: jk.fk(robot, q))(qs)
     if noise is None:
         return Ts
 
@@ -36,7 +46,7 @@ def _measure(robot: jk.Robot, qs: np.ndarray, noise: np.ndarray | None) -> jax.A
         R = T[:3, :3] @ spatial.exp_so3(n[3:] * SIGMA_O)
         return spatial.make_transform(R, T[:3, 3] + n[:3] * SIGMA_P)
 
-    return jax.vmap(perturb)(Ts, jnp.asarray(noise))
+    return jax.vmap(perturb)(Ts, noise)
 
 
 def niryo_calibration_set():
@@ -85,7 +95,7 @@ def test_recovers_perturbed_niryo_one_parameters_from_noisy_poses():
     assert float(res.rms_position_after) == pytest.approx(math.sqrt(3) * SIGMA_P, rel=0.2)
     assert float(res.rms_orientation_after) == pytest.approx(math.sqrt(3) * SIGMA_O, rel=0.2)
     # the calibrated robot is a robot: its poses match the truth to the noise level
-    T_fit = jax.vmap(lambda q: jk.fk(res.robot, q))(jnp.asarray(qs))
+    T_fit = _measure(res.robot, qs, None)
     T_true = _measure(true, qs, None)
     assert float(jnp.max(jnp.abs(T_fit[:, :3, 3] - T_true[:, :3, 3]))) < 1e-4
     hist = np.asarray(res.loss_history)[: int(res.steps) - 1]
@@ -94,7 +104,8 @@ def test_recovers_perturbed_niryo_one_parameters_from_noisy_poses():
 
 def test_identifiability_names_what_the_data_cannot_see():
     nominal = jk.robots.load("niryo_one", dtype=np.float64)
-    qs = sample_configurations(nominal, 30, 2)
+    # the configurations of the recovery test above: its regressor program is reused
+    qs = sample_configurations(nominal, M, 1)
     masks = niryo_calibration_set()
     assert jk.identifiability(nominal, qs, masks).unidentifiable == []
     # joint 4's x offset and the forearm length both lie along joint 4's axis
@@ -161,9 +172,15 @@ def test_batched_over_datasets_with_vmap():
         ]
     )
     free = {"a": np.array([True, True])}
-    fitted = jax.vmap(
-        lambda q, T: jk.calibrate(nominal, q, T, free, check_identifiable=False).params["a"]
-    )(jnp.asarray(qs), Ts)
+    # one program for the whole batched fit (eagerly, vmap would compile each of calibrate's
+    # inner programs batched and run the rest op by op)
+    fit = jax.jit(
+        jax.vmap(
+            lambda q, T: jk.calibrate(nominal, q, T, free, check_identifiable=False).params["a"]
+        ),
+        compiler_options=FAST_COMPILE,
+    )
+    fitted = fit(jnp.asarray(qs), Ts)
     np.testing.assert_allclose(np.asarray(fitted), true_a, rtol=0, atol=1e-9)
     with pytest.raises(jk.JaxkinError, match="check_identifiable=False"):
         jax.vmap(lambda q, T: jk.calibrate(nominal, q, T, free).params["a"])(jnp.asarray(qs), Ts)
