@@ -104,7 +104,7 @@ def test_gradients_finite_exactly_at_singular_configurations():
     planar = jk.robots.load("two_link_planar", dtype=np.float64)
     ur5 = jk.robots.load("ur5", dtype=np.float64)
 
-    @jax.jit
+    @jax.jit(compiler_options=FAST_COMPILE)
     def grads(q2, q6):
         out = {}
         for m in analysis.MEASURES:
@@ -235,11 +235,13 @@ def test_joint_torques_statics_and_power():
 def test_wrist_decoupling_det_factorises(name):
     robot = jk.robots.load(name, dtype=np.float64)
     qs = sample_configurations(robot, 20, 9)
-    out = jax.jit(jax.vmap(lambda q: jk.wrist_decoupling(robot, q, 1e-6, check=False)))(
-        jnp.asarray(qs)
-    )
-    out = jax.tree_util.tree_map(np.asarray, out)
-    J = np.stack([np.asarray(jk.geometric_jacobian(robot, q)) for q in qs[:3]])
+
+    def one(q):
+        return jk.wrist_decoupling(robot, q, 1e-6, check=False), jk.geometric_jacobian(robot, q)
+
+    kernel = jax.jit(jax.vmap(one), compiler_options=FAST_COMPILE)
+    out, J = jax.tree_util.tree_map(np.asarray, kernel(jnp.asarray(qs)))
+    J = J[:3]
     np.testing.assert_allclose(out.det_J[:3], np.linalg.det(J), rtol=1e-10, atol=1e-14)
     np.testing.assert_allclose(out.det_J, out.det_arm * out.det_wrist, rtol=1e-10, atol=1e-14)
     assert np.all(out.coupling <= 1e-12)
@@ -274,6 +276,21 @@ def test_wrist_decoupling_rejects_non_spherical_wrists():
         jk.wrist_decoupling(jk.robots.load("stanford"), np.zeros(6), 1e-6, wrist_joints=(1, 2, 3))
 
 
+@jax.jit(compiler_options=FAST_COMPILE)
+def _measures_of(J):
+    """The measures of the property below as one program per shape of J (op by op, each new
+    shape of a random J compiled every primitive anew)."""
+    dep = jk.dependent_columns(J)
+    return {
+        "s": jk.singular_values(J),
+        "inv": jk.manipulability(J, "inverse_condition"),
+        "w": jk.manipulability(J),
+        "nullity": dep.nullity,
+        "null_space": dep.null_space,
+        "rank": analysis.rank(J),
+    }
+
+
 @settings(max_examples=10)
 @given(
     st.sampled_from([2, 3, 6]),
@@ -285,16 +302,16 @@ def test_property_measures_bounded_and_consistent(m, n, seed):
     J = rng.normal(size=(m, n))
     if n > 1 and seed % 3 == 0:
         J[:, -1] = J[:, 0]  # a repeated column: rank deficient when n <= m
-    s = jk.singular_values(J)
-    inv = float(jk.manipulability(J, "inverse_condition"))
-    w = float(jk.manipulability(J))
+    out = jax.tree_util.tree_map(np.asarray, _measures_of(J))
+    s = out["s"]
+    inv = float(out["inv"])
+    w = float(out["w"])
     assert 0.0 <= inv <= 1.0 + 1e-15
     assert w >= 0.0
-    expected = np.prod(np.asarray(s)) if m <= n else 0.0
+    expected = np.prod(s) if m <= n else 0.0
     assert w == pytest.approx(expected, rel=1e-12, abs=1e-300)
-    dep = jk.dependent_columns(J)
-    assert int(dep.nullity) == n - int(analysis.rank(J))
-    N = np.asarray(dep.null_space)[:, : int(dep.nullity)]
+    assert int(out["nullity"]) == n - int(out["rank"])
+    N = out["null_space"][:, : int(out["nullity"])]
     np.testing.assert_allclose(J @ N, 0.0, atol=1e-12 * max(1.0, float(s[0])))
 
 
