@@ -114,7 +114,9 @@ def _scale(x: np.ndarray) -> float:
 
 
 def _assert_vmap_matches(single, batched: dict, inputs: tuple) -> None:
-    """``single`` (jitted, one item, values only) equals row ``i`` of ``batched``."""
+    """``single`` (jitted, one item, values only) equals row ``i`` of ``batched``. The items are
+    sliced on the host (slicing a JAX array compiles an indexing program per shape)."""
+    inputs = _np(tuple(inputs))
     for i in range(len(inputs[0])):
         one = _np(single(*(x[i] for x in inputs)))
         assert one, "nothing compared"
@@ -245,7 +247,10 @@ def _jacobian_batch(name: str, dtype):
     random twists, secondary joint velocities and wrenches."""
     robot = jk.robots.load(name, dtype=dtype)
     qs = PLANAR_QS if name == "two_link_planar" else UR5_QS
-    Js = jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(jnp.asarray(qs, dtype))
+    jacobians = jax.jit(
+        jax.vmap(lambda q: jk.geometric_jacobian(robot, q)), compiler_options=FAST_COMPILE
+    )
+    Js = jacobians(jnp.asarray(qs, dtype))
     Js = jnp.concatenate([Js, jnp.zeros_like(Js[:1])])
     n, m, dof = Js.shape
     v, qd0, F = (jnp.asarray(_rand(t, s, np.float64), dtype)
@@ -436,7 +441,7 @@ def test_robot_functions_finite_at_singular_configurations(robot_case):
     def measure(q):
         return jk.manipulability(jk.geometric_jacobian(robot, q), rows=task)
 
-    m = np.asarray(jax.jit(jax.vmap(measure))(q))
+    m = np.asarray(jax.jit(jax.vmap(measure), compiler_options=FAST_COMPILE)(q))
     assert np.all(m[:-1] <= 1e-15) and m[-1] > 1e-3
 
 
@@ -583,7 +588,7 @@ N_STEPS, DT = 4, 0.01
 
 def _rrc_paths(robot: jk.Robot, q0s):
     """From fk(q0), 2 cm along world x (for the stretched arm: outward, out of reach)."""
-    T0 = jax.jit(jax.vmap(lambda q: jk.fk(robot, q)))(q0s)
+    T0 = jax.jit(jax.vmap(lambda q: jk.fk(robot, q)), compiler_options=FAST_COMPILE)(q0s)
     ramp = jnp.linspace(0.0, 0.02, N_STEPS, dtype=T0.dtype)
     step = jnp.zeros((N_STEPS, 4, 4), T0.dtype).at[:, 0, 3].set(ramp)
     return T0[:, None] + step[None]
@@ -633,7 +638,7 @@ def test_calibrate_float32_reduces_the_error():
     nominal = jk.robots.load("two_link_planar", a1=1.0, a2=0.7, dtype=np.float32)
     true = nominal.replace(params={**nominal.params, "a": jnp.array([1.013, 0.688], np.float32)})
     qs = np.random.default_rng(4).uniform(-PI, PI, size=(30, 2)).astype(np.float32)
-    Ts = jax.jit(jax.vmap(lambda q: jk.fk(true, q)))(jnp.asarray(qs))
+    Ts = jax.jit(jax.vmap(lambda q: jk.fk(true, q)), compiler_options=FAST_COMPILE)(jnp.asarray(qs))
     assert Ts.dtype == np.float32
     res = jk.calibrate(nominal, qs, Ts, ["a"])
     assert res.robot.dtype == np.float32
