@@ -956,6 +956,7 @@ def _solve_batch_impl(
     lam0,
     max_steps,
     patience,
+    starts,
     *,
     f,
     method,
@@ -964,10 +965,17 @@ def _solve_batch_impl(
     num_seeds,
     task=None,
 ):
+    """The jitted solve of a batch: ``_solve_core``'s loops, then ``_finish`` per target.
+
+    ``starts`` (int32): the starts per target of an LM solve, an argument (traced), so that
+    calls differing only in ``num_seeds`` share one compiled solver, as ``max_steps`` and
+    ``tol`` do; ``num_seeds`` (static) is that count for optax (its starts run side by side, an
+    array axis), None for LM.
+    """
     if task is None:
         T_all = T_all.reshape(-1, 4, 4)
     static = (f, method, optimizer, lanes, num_seeds, task)
-    args = (T_all, q0, pool, tol, lam0, max_steps, patience)
+    args = (T_all, q0, pool, tol, lam0, max_steps, patience, starts)
     # A concrete robot stays out of the differentiated arguments (static: constants folded); a
     # traced one is an argument, so that derivatives reach its leaves.
     if is_traced(robot):
@@ -985,12 +993,14 @@ def _solve_batch_impl(
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
 def _solve_core(
-    robot_static, static, robot_traced, T_all, q0, pool, tol, lam0, max_steps, patience
+    robot_static, static, robot_traced, T_all, q0, pool, tol, lam0, max_steps, patience, starts
 ):
     """The solver loops: ``(q, steps, seed, hit_max, unreachable)`` per target. Differentiated
     by :func:`_solve_core_jvp` (the implicit function theorem), never through the loops."""
     robot = robot_static if robot_traced is None else robot_traced
     f, method, optimizer, lanes, num_seeds, task = static
+    if method == "lm":
+        num_seeds = starts  # traced: one compile for every num_seeds
     if task is not None:  # a whole-body target (LM only)
         dtype = T_all.T.dtype
         N = T_all.T.shape[0]
@@ -1118,8 +1128,10 @@ def solve_ik(
         (default ``jax.random.key(0)``; infinite limits sample [-pi, pi] or [-1, 1] m). LM
         tries them in turn, restarting only when a start fails, until one converges; optax runs
         them all and keeps the best. Default: 64 for LM (:data:`DEFAULT_NUM_SEEDS`), 1 for
-        optax. ``num_seeds=1``: ``q0`` only. A floating base is not drawn at random (see the
-        module doc: restarts keep ``q0``'s base, then move it to put one frame on its target).
+        optax. ``num_seeds=1``: ``q0`` only. For LM a new value does not recompile the solver
+        (nor do ``max_steps``, ``tol``, ``damping`` and ``patience``). A floating base is not
+        drawn at random (see the module doc: restarts keep ``q0``'s base, then move it to put
+        one frame on its target).
       seeds: explicit extra starts instead of random ones: (S, nq), the same for every target,
         or (N, S, nq); tried after ``q0`` (brought within the limits; a floating base as
         given), and no others. Excludes ``num_seeds``.
@@ -1214,16 +1226,17 @@ def solve_ik(
         robot,
         T,
         q0,
-        _pool(robot, seeds, key, N, S, dtype),
+        _pool(robot, seeds, key, N, S, dtype, method),
         jnp.asarray(tol, dtype),
         jnp.asarray(damping, dtype),
         jnp.asarray(max_steps, jnp.int32),
         jnp.asarray(patience, jnp.int32),
+        jnp.asarray(S, jnp.int32),
         f=f,
         method=method,
         optimizer=optimizer if method == "optax" else None,
         lanes=_lanes(N) if lanes is None else int(lanes),
-        num_seeds=S,
+        num_seeds=S if method == "optax" else None,
         task=task,
     )
     if task is not None and not isinstance(frame, (list, tuple)):  # one frame: no k axis
@@ -1395,14 +1408,16 @@ _POOL = 4096
 targets (:func:`_start_fn`)."""
 
 
-def _pool(robot, seeds, key, n, S, dtype):
-    """The (P, dof) starts after ``q0`` (see :func:`_start_fn`), or None for one start."""
+def _pool(robot, seeds, key, n, S, dtype, method="lm"):
+    """The (P, dof) starts after ``q0`` (see :func:`_start_fn`); for one start nothing is read
+    from it: None for optax, zeros of the usual shape for LM (so that ``num_seeds=1`` shares the
+    compiled solver of the default ``num_seeds``)."""
     if seeds is not None:
         return jnp.reshape(jnp.asarray(seeds, dtype), (-1, robot.nq))
-    if S == 1:
-        return None
     # A fixed size: the sampler compiles once per robot size, whatever the batch.
     size = max(_POOL, S - 1)
+    if S == 1:
+        return None if method == "optax" else jnp.zeros((size, robot.nq), dtype)
     return sampling.sample_configurations(robot, size, 0 if key is None else key, dtype=dtype)
 
 
