@@ -150,11 +150,17 @@ def _constants(robot: Robot, dtype, joints: list | None = None) -> _Constants:
     )
 
 
-def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
+def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints, materialise: bool) -> dict:
     """cos and sin of each revolute joint's value among ``joints``, computed once and together.
 
-    The optimisation barrier asks XLA not to re-derive them inside each fusion of the kernel
-    (its CPU pipeline may still drop it; see PERFORMANCE.md).
+    XLA's CPU pipeline removes ``optimization_barrier`` and fuses an elementwise producer into
+    every consumer, so a batched kernel whose results XLA splits into many fusions (a Jacobian:
+    one per shared intermediate) re-derived each sine and cosine in each of them (a humanoid
+    hand's Jacobian: 36 sin/cos ops for 9 joints). With ``materialise`` both are read through
+    an identity gather: a gather reuses its operand's elements, so XLA computes the stacked
+    (2, k) array once, into one buffer, and the fusions load it (a copy: the same values; the
+    arithmetic around them may contract into FMAs differently, a few ulps). Without it (the
+    poses: XLA already computes them once there) the program is as before.
     """
     values = {}
     for j in joints:
@@ -164,8 +170,13 @@ def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints) -> dict:
         return {}
     keys = list(values)
     v = jnp.stack([jnp.asarray(values[j]) for j in keys])
-    c, s = jax.lax.optimization_barrier((jnp.cos(v), jnp.sin(v)))
-    return {j: (c[i], s[i]) for i, j in enumerate(keys)}
+    if not materialise:
+        c, s = jax.lax.optimization_barrier((jnp.cos(v), jnp.sin(v)))
+        return {j: (c[i], s[i]) for i, j in enumerate(keys)}
+    cs = jax.lax.optimization_barrier(jnp.stack([jnp.cos(v), jnp.sin(v)]))
+    idx = np.arange(len(keys))  # the identity gather that materialises them (see above)
+    cs = cs.at[:, idx].get(indices_are_sorted=True, unique_indices=True)
+    return {j: (cs[0, i], cs[1, i]) for i, j in enumerate(keys)}
 
 
 _MULTI = ("free", "ball", "planar")
@@ -206,7 +217,13 @@ def path_joints(robot: Robot, frames) -> list:
     return sorted(joints)
 
 
-def scalar_pass(robot: Robot, q: jax.Array, frames=None, root: int | None = None) -> ScalarPass:
+def scalar_pass(
+    robot: Robot,
+    q: jax.Array,
+    frames=None,
+    root: int | None = None,
+    materialise_trig: bool = False,
+) -> ScalarPass:
     """One pass from the base to every frame (or to ``frames`` only: frame indices), elementwise
     and with constants folded.
 
@@ -216,7 +233,9 @@ def scalar_pass(robot: Robot, q: jax.Array, frames=None, root: int | None = None
     ``root`` (a frame index on every path of ``frames``) the poses are relative to that frame
     (identity at ``root``) and only the joints below it are computed: the model's constants
     fold below a free-flyer, whose rotation is then applied once per result instead of into
-    every pose. ``q`` must be validated (``check_q``).
+    every pose. ``materialise_trig``: XLA computes the sines and cosines once, into one
+    buffer, however many fusions read them (the Jacobian kernels; see :func:`_joint_trig`).
+    ``q`` must be validated (``check_q``).
     """
     dtype = result_dtype(robot, q)
     q = q.astype(dtype)
@@ -234,7 +253,7 @@ def scalar_pass(robot: Robot, q: jax.Array, frames=None, root: int | None = None
         }
     )
     qv = {i: q[i] for i in used}
-    trig = _joint_trig(robot, K, qv, joints)
+    trig = _joint_trig(robot, K, qv, joints, materialise_trig)
     Rs: list = [None] * robot.n_frames
     ps: list = [None] * robot.n_frames
     zs: list = [None] * n
@@ -482,13 +501,17 @@ def all_frame_transforms(robot: Robot, q: jax.Array) -> jax.Array:
 
 
 # ------------------------------------------------------------------ several frames, one pass
-def shared_scalar_pass(robot: Robot, q: jax.Array, frames: tuple[int, ...]) -> ScalarPass | None:
+def shared_scalar_pass(
+    robot: Robot, q: jax.Array, frames: tuple[int, ...], materialise_trig: bool = False
+) -> ScalarPass | None:
     """One :func:`scalar_pass` over the union of the paths of those ``frames`` (indices) that
     :func:`scan_joints` leaves unrolled: each joint on them is computed once, however many of the
     frames it moves. None when every frame's path is scanned (long serial paths: one
-    :func:`scan_pass` each)."""
+    :func:`scan_pass` each). ``materialise_trig`` as for :func:`scalar_pass`."""
     unrolled = tuple(dict.fromkeys(f for f in frames if scan_joints(robot, f) is None))
-    return scalar_pass(robot, q, frames=unrolled) if unrolled else None
+    if not unrolled:
+        return None
+    return scalar_pass(robot, q, frames=unrolled, materialise_trig=materialise_trig)
 
 
 def frame_poses(robot: Robot, q: jax.Array, frames: tuple[int, ...]) -> tuple[jax.Array, jax.Array]:

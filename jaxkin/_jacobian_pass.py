@@ -199,9 +199,11 @@ def jacobian_pass(
     path = scan_joints(robot, frame)
     if path is not None:
         return _jacobian_pass_scan(robot, q, frame, path, point, reference)
-    sp = scalar_pass(robot, q, frames=(frame,))
+    sp = scalar_pass(robot, q, frames=(frame,), materialise_trig=True)
     root = free_root(robot, frame)
-    rp = None if root is None else scalar_pass(robot, q, frames=(frame,), root=root)
+    rp = None
+    if root is not None:
+        rp = scalar_pass(robot, q, frames=(frame,), root=root, materialise_trig=True)
     return _unrolled_jacobian(robot, sp, frame, point, reference, rp)
 
 
@@ -211,7 +213,7 @@ def world_jacobian_pass(
     """:func:`jacobian_pass` with every column from the world pass (none computed below a
     free-flyer and rotated: the kernel before that path was added), for a frame whose path is
     unrolled; the reference the fast path is tested against. Unchecked."""
-    sp = scalar_pass(robot, q, frames=(frame,))
+    sp = scalar_pass(robot, q, frames=(frame,), materialise_trig=True)
     return _unrolled_jacobian(robot, sp, frame, point, reference)
 
 
@@ -330,11 +332,17 @@ def jacobians_pass(
     ``jacobian_pass(robot, q, frames[i], points[i], reference)`` bit for bit. ``q`` must be
     checked; nothing is checked here.
     """
-    sp = shared_scalar_pass(robot, q, frames)
+    sp = shared_scalar_pass(robot, q, frames, materialise_trig=True)
     unrolled = [f for f in dict.fromkeys(frames) if scan_joints(robot, f) is None]
     roots = {f: free_root(robot, f) for f in unrolled}
     relative = {  # one pass below each free-flyer, over the union of its frames' paths
-        r: scalar_pass(robot, q, frames=tuple(f for f in unrolled if roots[f] == r), root=r)
+        r: scalar_pass(
+            robot,
+            q,
+            frames=tuple(f for f in unrolled if roots[f] == r),
+            root=r,
+            materialise_trig=True,
+        )
         for r in dict.fromkeys(roots.values())
         if r is not None
     }
