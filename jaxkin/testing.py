@@ -47,6 +47,7 @@ import numpy as np
 from . import spatial
 from ._checks import check_q, refuse_multi_dof, result_dtype
 from ._forward import forward_pass, frame_pose
+from ._jit import compiler_options
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
 from .model import Robot
 from .sampling import sampling_bounds
@@ -250,6 +251,7 @@ def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.nd
     return st.tuples(*elems).map(to_manifold)
 
 
+_FD_ROWS = 8  # finite-difference steps are taken in blocks of this many columns
 _ROWS = {"all": slice(0, 6), "translation": slice(0, 3), "rotation": slice(3, 6)}
 
 
@@ -394,7 +396,11 @@ def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
         R, p = frame_pose(robot, qq, f)
         return (p if pt is None else p + R @ pt), R
 
-    eye = jnp.eye(robot.nv, dtype=jnp.float64)
+    nv = robot.nv
+    # One row per column, padded with zero steps to a multiple of _FD_ROWS: op by op (property
+    # tests under jax.disable_jit) the batched operations then have one shape per block of
+    # _FD_ROWS columns, not one per robot size, and compile once for all robots up to that size.
+    eye = jnp.eye(-(-nv // _FD_ROWS) * _FD_ROWS, nv, dtype=jnp.float64)
     if robot.nq == robot.nv:
         p_plus, R_plus = jax.vmap(pose)(q[None, :] + h * eye)
         p_minus, R_minus = jax.vmap(pose)(q[None, :] - h * eye)
@@ -403,8 +409,8 @@ def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
 
         p_plus, R_plus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, h * e)))(eye)
         p_minus, R_minus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, -h * e)))(eye)
-    Jv = ((p_plus - p_minus) / (2 * h)).T
-    Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus) / (2 * h)).T
+    Jv = ((p_plus - p_minus)[:nv] / (2 * h)).T
+    Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus)[:nv] / (2 * h)).T
     p0, R0 = pose(q)
     return Jv, Jw, p0, R0
 
@@ -434,7 +440,7 @@ def assert_jacobian_consistent(
     float32, reach being the largest distance of a frame from the base. Finite differences run
     only in float64 (default: whenever x64 is on and the robot is float64). Everything is
     evaluated by one compiled program per call (one compile for a robot used once, as in a
-    property test over random robots).
+    property test over random robots), with the compiler options of jaxkin's own kernels.
     """
     fn = "jk.testing.assert_jacobian_consistent"
     q = check_q(robot, q, fn=fn, batch_hint=f"[{fn}(robot, q) for q in qs]")
@@ -460,7 +466,8 @@ def assert_jacobian_consistent(
             )
         return reach, out
 
-    reach, out = jax.device_get(jax.jit(values)(q))
+    program = jax.jit(values, compiler_options=compiler_options() or None)
+    reach, out = jax.device_get(program(q))
     reach = float(reach)
     tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
     for ref in references:
