@@ -84,6 +84,18 @@ def test_rdot_rt_skew_and_angular_velocity_addition(chain, t0):  # Eq. 4.18
     ks = jnp.asarray(np.array([c[0] for c in chain]))
     a = jnp.asarray([c[1] for c in chain])
     b = jnp.asarray([c[2] for c in chain])
+    R, Rdot, omega, summed = jax.device_get(_chain_velocities(ks, a, b, jnp.asarray(t0)))
+    S = np.asarray(Rdot @ R.T)
+    np.testing.assert_allclose(S, -S.T, atol=1e-12)
+    np.testing.assert_allclose(omega, summed, rtol=0, atol=1e-12 * len(chain))
+
+
+@jax.jit  # one program per chain length (op by op, every length compiles its own operations)
+def _chain_velocities(ks, a, b, t0):
+    """``(R, Rdot, omega, summed)`` of the chain ``R(t) = prod_i Rot(k_i, a_i + b_i t)`` at t0:
+    the tangent by ``jax.jvp``, omega by ``spatial.angular_velocity`` and the sum of the relative
+    angular velocities (each ``b_i k_i``, the axis being fixed in both frames) rotated into
+    frame 0."""
 
     def rel(t):
         return jax.vmap(spatial.rotation_about_axis)(ks, a + b * t)
@@ -94,13 +106,10 @@ def test_rdot_rt_skew_and_angular_velocity_addition(chain, t0):  # Eq. 4.18
             R = R @ Ri
         return R
 
-    R, Rdot = jax.jvp(R_total, (jnp.asarray(t0),), (jnp.asarray(1.0),))
-    S = np.asarray(Rdot @ R.T)
-    np.testing.assert_allclose(S, -S.T, atol=1e-12)
-    omega = np.asarray(spatial.angular_velocity(R_total, t0))
-    # relative angular velocity of frame i in frame i-1 is b_i k_i (the axis is fixed in both)
-    summed = np.asarray(spatial.compose_angular_velocities(rel(t0), b[:, None] * ks))
-    np.testing.assert_allclose(omega, summed, rtol=0, atol=1e-12 * len(chain))
+    R, Rdot = jax.jvp(R_total, (t0,), (jnp.ones_like(t0),))
+    omega = spatial.angular_velocity(R_total, t0)
+    summed = spatial.compose_angular_velocities(rel(t0), b[:, None] * ks)
+    return R, Rdot, omega, summed
 
 
 # --- rotations and parameterisations ----------------------------------------------------------
@@ -158,22 +167,32 @@ def test_exp_log_round_trip(axis, angle):
     )
 
 
+@jax.jit  # one program for every angle below (op by op, each derivative compiles its own ops)
+def _exp_log_derivatives(w):
+    R = spatial.exp_so3(w)
+    return dict(
+        J_exp=jax.jacfwd(spatial.exp_so3)(w),
+        J_exp_rev=jax.jacrev(spatial.exp_so3)(w),
+        J_log=jax.jacfwd(spatial.log_so3)(R),
+        J_log_rev=jax.jacrev(spatial.log_so3)(R),
+        g=jax.grad(lambda ww: jnp.sum(spatial.log_so3(spatial.exp_so3(ww)) ** 2))(w),
+        log=spatial.log_so3(R),
+        J=jax.jacfwd(lambda ww: spatial.log_so3(spatial.exp_so3(ww)))(w),
+    )
+
+
 @pytest.mark.parametrize("angle", [0.0, 1e-12, 1e-6, 1e-3, math.pi - 1e-6, math.pi])
 def test_exp_and_log_values_and_gradients_are_finite_at_0_and_pi(angle):
     axis = np.array([0.48, -0.6, 0.64])
     w = jnp.asarray(axis * angle)
-    J_exp = jax.jacfwd(spatial.exp_so3)(w)
-    J_exp_rev = jax.jacrev(spatial.exp_so3)(w)
+    d = jax.device_get(_exp_log_derivatives(w))
+    J_exp, J_exp_rev = d["J_exp"], d["J_exp_rev"]
     assert np.all(np.isfinite(J_exp)) and np.all(np.isfinite(J_exp_rev))
-    R = spatial.exp_so3(w)
-    J_log = jax.jacfwd(spatial.log_so3)(R)
-    J_log_rev = jax.jacrev(spatial.log_so3)(R)
-    g = jax.grad(lambda ww: jnp.sum(spatial.log_so3(spatial.exp_so3(ww)) ** 2))(w)
-    for arr in (J_log, J_log_rev, g, spatial.log_so3(R)):
+    for arr in (d["J_log"], d["J_log_rev"], d["g"], d["log"]):
         assert np.all(np.isfinite(np.asarray(arr))), angle
     if angle < 1.0:
         # log(exp(w)) = w near 0, so its Jacobian is the identity
-        J = jax.jacfwd(lambda ww: spatial.log_so3(spatial.exp_so3(ww)))(w)
+        J = d["J"]
         np.testing.assert_allclose(np.asarray(J), np.eye(3), atol=1e-9)
         # d exp / d w at 0 is skew(e_k) for each k (the generators)
         if angle == 0.0:
