@@ -1,5 +1,10 @@
 """Speed and scale, guarded without timing: compile counts, HLO structure, chunked == unchunked ==
-sharded, streaming to disk, long chains through lax.scan."""
+sharded, streaming to disk, long chains through lax.scan.
+
+Where the robot is not the point (compile counts, chunking, streaming, sharding) it is a small one
+(``scara``, four joints): a Panda's kernels compile several times slower and test nothing more.
+The test's own programs are compiled as jaxkin compiles its own (:func:`compiled`).
+"""
 
 import itertools
 import os
@@ -15,7 +20,15 @@ import pytest
 import jaxkin as jk
 import jaxkin.testing as jkt
 from jaxkin import _forward as kinematics
-from jaxkin import batch
+from jaxkin import _jit, batch
+
+SMALL = "scara"  # revolute and prismatic joints
+
+
+def compiled(f, **kwargs):
+    """``jax.jit(f)`` with the compiler options of jaxkin's own executables (XLA's CPU fusion
+    emitters off: these kernels compile two to three times faster, same tracing and caching)."""
+    return jax.jit(f, compiler_options=_jit.compiler_options() or None, **kwargs)
 
 
 def _chain(n, seed=0, convention="standard", prismatic=True):
@@ -38,15 +51,15 @@ def _chain(n, seed=0, convention="standard", prismatic=True):
 
 # --- compile counts ----------------------------------------------------------------------------
 def test_kernel_compiles_once_per_shape_and_dtype_never_per_parameter_value():
-    robot = jk.robots.load("panda")
+    robot = jk.robots.load(SMALL)
     traces = []
 
     def kernel(r, qs):
         traces.append(qs.shape)
         return jax.vmap(lambda q: jk.geometric_jacobian(r, q))(qs)
 
-    f = jax.jit(kernel)
-    qs = jnp.zeros((64, 7))
+    f = compiled(kernel)
+    qs = jnp.zeros((64, 4))
     f(robot, qs).block_until_ready()
     rng = np.random.default_rng(0)
     for _ in range(5):  # new parameter values: same compiled kernel
@@ -56,34 +69,36 @@ def test_kernel_compiles_once_per_shape_and_dtype_never_per_parameter_value():
         )
         f(r2, qs + 0.1).block_until_ready()
     assert len(traces) == 1
-    f(robot, jnp.zeros((65, 7))).block_until_ready()  # new shape: one more
+    f(robot, jnp.zeros((65, 4))).block_until_ready()  # new shape: one more
     f(robot.astype(np.float32), qs.astype(np.float32)).block_until_ready()  # new dtype
     assert len(traces) == 3
     assert f._cache_size() == 3
 
 
 def test_chunked_map_compiles_once_for_any_number_of_chunks():
-    robot = jk.robots.load("niryo_one")
+    robot = jk.robots.load(SMALL)
     traces = []
 
     def fn(q):
         traces.append(1)
         return jk.geometric_jacobian(robot, q)
 
-    qs = np.random.default_rng(1).uniform(-1, 1, (1003, 6))
+    qs = np.random.default_rng(1).uniform(-1, 1, (1003, 4))
     out = batch.chunked_map(fn, qs, chunk_size=128)
     assert len(traces) == 1
-    expected = jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(qs)
+    expected = compiled(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(qs)
     np.testing.assert_array_equal(out, np.asarray(expected))
 
 
 # --- long chains -------------------------------------------------------------------------------
 @pytest.mark.parametrize("convention", ["standard", "modified"])
 def test_scan_path_equals_unrolled_path(convention, monkeypatch):
-    """A 12-joint chain whose placements do not fold is scanned by default (and a 36-joint one
-    by its length: test_long_chain_program_size_does_not_grow_with_length); lifting both
-    thresholds unrolls it: the two passes agree."""
-    robot = _chain(12, seed=3, convention=convention)
+    """An 8-joint chain whose placements do not fold is scanned by default (SCAN_MIN_UNFOLDED;
+    and a 36-joint one by its length: test_long_chain_program_size_does_not_grow_with_length);
+    lifting both thresholds unrolls it: the two passes agree. Each pass is traced afresh, in one
+    program (eager calls would reuse the executables cached for the first pass: the robot is the
+    same value, so the unrolled pass would never run)."""
+    robot = _chain(8, seed=3, convention=convention)
     assert kinematics.uses_scan(robot)
     q = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, robot.dof))
     qd = jnp.asarray(np.random.default_rng(3).uniform(-1, 1, robot.dof))
@@ -93,8 +108,8 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", joints)
         monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", unfolded)
         assert kinematics.uses_scan(robot) == (joints == defaults[0])
-        outs.append(
-            [
+        every = compiled(
+            lambda q, qd: [
                 jk.fk_all(robot, q),
                 jk.fk(robot, q, frame="link7"),
                 *[
@@ -106,6 +121,9 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
                 jk.analytical_jacobian(robot, q, "zyz", return_margin=True)[0],
             ]
         )
+        scans = str(every.trace(q, qd).jaxpr).count(" scan[")
+        assert (scans > 0) == (joints == defaults[0]), scans  # the pass asked for was traced
+        outs.append(every(q, qd))
     for a, b in zip(*outs, strict=True):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
 
@@ -133,10 +151,10 @@ def test_long_chain_program_size_does_not_grow_with_length():
 def test_three_thousand_joint_chain_runs():
     robot = _chain(3000, seed=7, prismatic=False)
     q = jnp.asarray(np.random.default_rng(8).uniform(-0.1, 0.1, 3000))
-    J = jax.jit(lambda q: jk.geometric_jacobian(robot, q))(q)
+    J = compiled(lambda q: jk.geometric_jacobian(robot, q))(q)
     assert J.shape == (6, 3000) and bool(jnp.all(jnp.isfinite(J)))
     # the tip's angular column sums are the tip's angular velocity for qd = 1: compare with jvp
-    T, Tdot = jax.jvp(lambda q: jk.fk(robot, q), (q,), (jnp.ones(3000),))
+    T, Tdot = compiled(lambda q: jax.jvp(lambda q: jk.fk(robot, q), (q,), (jnp.ones(3000),)))(q)
     w = jk.spatial.vee(Tdot[:3, :3] @ T[:3, :3].T)
     np.testing.assert_allclose(
         np.asarray(J.sum(axis=1)), np.concatenate([Tdot[:3, 3], w]), rtol=0, atol=1e-9
@@ -153,9 +171,9 @@ def _kernel(robot):
 
 
 def test_path_outputs_equal_in_memory_results(tmp_path):
-    robot = jk.robots.load("ur5")
+    robot = jk.robots.load(SMALL)
     rng = np.random.default_rng(5)
-    qs, qds = rng.uniform(-3, 3, (777, 6)), rng.uniform(-1, 1, (777, 6))
+    qs, qds = rng.uniform(-3, 3, (777, 4)), rng.uniform(-1, 1, (777, 4))
     mem = batch.chunked_map(_kernel(robot), qs, qds, chunk_size=100)
     npz = batch.chunked_map(_kernel(robot), qs, qds, chunk_size=100, out=tmp_path / "r.npz")
     with np.load(npz) as z:
@@ -190,9 +208,9 @@ def test_path_output_is_atomic(tmp_path):
 
 
 def test_stream_map_equals_chunked_map_and_compiles_once():
-    robot = jk.robots.load("panda")
+    robot = jk.robots.load(SMALL)
     rng = np.random.default_rng(6)
-    qs, qds = rng.uniform(-1, 1, (1000, 7)), rng.uniform(-1, 1, (1000, 7))
+    qs, qds = rng.uniform(-1, 1, (1000, 4)), rng.uniform(-1, 1, (1000, 4))
     traces = []
 
     def fn(q, qd):
@@ -224,9 +242,9 @@ SHARDED = textwrap.dedent(
     import jaxkin as jk
     from jaxkin import batch
     assert len(jax.devices()) == 4, jax.devices()
-    robot = jk.robots.load("panda")
+    robot = jk.robots.load("scara")  # small: what is tested is the sharding
     rng = np.random.default_rng(0)
-    qs, qds = rng.uniform(-1, 1, (1001, 7)), rng.uniform(-1, 1, (1001, 7))
+    qs, qds = rng.uniform(-1, 1, (1001, 4)), rng.uniform(-1, 1, (1001, 4))
     def fn(q, qd):
         J = jk.geometric_jacobian(robot, q)
         return J, J @ qd
