@@ -1,7 +1,15 @@
-"""The command line: `jaxkin velocities` end to end (in-process), its errors, atomic output."""
+"""The command line: `jaxkin velocities` end to end (in-process), its errors, atomic output.
+
+Compiling the results kernels is most of this file's time: one per (robot, options, dtype, rows
+per chunk). Tests that only need some run share one (:func:`niryo_run`), and the others keep to a
+few robots and row counts so that a kernel compiled by one test is loaded from the run's
+compilation cache by the next (conftest.py). Library results are recomputed by eager calls,
+compiled once per robot and options.
+"""
 
 import ast
 import collections
+import contextlib
 import io
 import os
 import pathlib
@@ -48,17 +56,17 @@ def load(path):
 
 
 def recompute(robot, qs, frame=None, reference="world_aligned", representation="rpy"):
-    """J, Ja and margin of a few rows straight from the library (one jitted vmap: eager calls
-    would compile op by op, which is slower)."""
+    """J, Ja and margin of a few rows straight from the library, row by row (eager calls: one
+    compiled kernel per robot and options, shared by the tests that use them)."""
 
     def one(q):
         J = jk.geometric_jacobian(robot, q, frame=frame, reference=reference)
         Ja, margin = jk.analytical_jacobian(
             robot, q, representation, frame=frame, return_margin=True
         )
-        return J, Ja, margin
+        return np.asarray(J), np.asarray(Ja), np.asarray(margin)
 
-    return jax.jit(jax.vmap(one))(qs)
+    return [np.stack(parts) for parts in zip(*(one(q) for q in qs), strict=True)]
 
 
 def assert_usage_error(capsys, *argv, match):
@@ -69,13 +77,33 @@ def assert_usage_error(capsys, *argv, match):
     assert "Traceback" not in err and out == ""
 
 
-def test_niryo_one_float64(capsys, in_tmp):
-    n = 2001  # 4 chunks of 501 rows, the last one with 3 padding rows
-    code, out, _ = run(capsys, "velocities", "--n", str(n), "--chunk-size", "512", "--output",
-                       "v.npz", "--seed", "3")  # fmt: skip
+NIRYO_N = 2001
+
+
+@pytest.fixture(scope="module")
+def niryo_run(tmp_path_factory):
+    """One ``jaxkin velocities`` run of the default robot (niryo_one, float64, seed 3), shared
+    by the tests that read it: ``(exit code, stdout, path of its .npz)``. 2,001 rows in chunks
+    of at most 512: the checked kernel runs 2 chunks of 500 rows, the one-pass kernel 2 of 501,
+    the last one with 3 padding rows."""
+    where = tmp_path_factory.mktemp("niryo")
+    out, err, before = io.StringIO(), io.StringIO(), os.getcwd()
+    os.chdir(where)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = cli.main(["velocities", "--n", str(NIRYO_N), "--chunk-size", "512",
+                             "--output", "v.npz", "--seed", "3"])  # fmt: skip
+    finally:
+        os.chdir(before)
+    return code, out.getvalue(), where / "v.npz"
+
+
+def test_niryo_one_float64(niryo_run):
+    n = NIRYO_N  # 4 chunks of 500 or 501 rows, the last one with 3 padding rows
+    code, out, path = niryo_run
     assert code == 0
-    assert "PASS" in out and "niryo_one" in out and str(in_tmp / "v.npz") in out
-    d = load(in_tmp / "v.npz")
+    assert "PASS" in out and "niryo_one" in out and str(path) in out
+    d = load(path)
     assert set(d) == KEYS | META
     robot = jk.robots.load("niryo_one", dtype="float64")
     assert d["q"].shape == d["qd"].shape == (n, 6)
@@ -133,18 +161,19 @@ def test_float32(capsys, in_tmp):
 
 
 def test_default_output_name_and_no_output(capsys, in_tmp):
-    code, out, _ = run(capsys, "velocities", "two_link_planar", "--n", "50", "--no-output")
+    # 40 rows, as in every two_link_planar run here: one compiled kernel serves them all
+    code, out, _ = run(capsys, "velocities", "two_link_planar", "--n", "40", "--no-output")
     assert code == 0 and "none (--no-output)" in out
     assert os.listdir(in_tmp) == []
-    code, _, _ = run(capsys, "velocities", "two_link_planar", "--n", "50")
+    code, _, _ = run(capsys, "velocities", "two_link_planar", "--n", "40")
     assert code == 0
-    assert os.listdir(in_tmp) == ["velocities_two_link_planar_50.npz"]
-    assert load(in_tmp / "velocities_two_link_planar_50.npz")["sigma"].shape == (50, 2)
+    assert os.listdir(in_tmp) == ["velocities_two_link_planar_40.npz"]
+    assert load(in_tmp / "velocities_two_link_planar_40.npz")["sigma"].shape == (40, 2)
 
 
 def test_float64_turns_x64_on_for_the_run_only(capsys):
     jax.config.update("jax_enable_x64", False)  # conftest turns it back on after the test
-    code, out, _ = run(capsys, "velocities", "two_link_planar", "--n", "20", "--no-output")
+    code, out, _ = run(capsys, "velocities", "two_link_planar", "--n", "40", "--no-output")
     assert code == 0 and "float64" in out and "PASS (tol 1e-10)" in out
     assert not jax.config.read("jax_enable_x64")
 
@@ -272,7 +301,7 @@ def test_failed_write_keeps_the_old_file(capsys, monkeypatch, in_tmp):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(jk.io._NpzFile, "append", half_written)
-    assert_usage_error(capsys, "velocities", "two_link_planar", "--n", "10", "--output", "v.npz",
+    assert_usage_error(capsys, "velocities", "two_link_planar", "--n", "40", "--output", "v.npz",
                        match="No space left on device")  # fmt: skip
     assert os.listdir(in_tmp) == ["v.npz"]
     assert (in_tmp / "v.npz").read_bytes() == b"previous result"
@@ -408,7 +437,8 @@ def test_jacobian_notes_a_frame_no_joint_moves(capsys):
 
 # ---------------------------------------------------------------------- configuration files
 def twist_of(robot, q, qd):
-    return np.asarray(jax.vmap(lambda q, qd: jk.twist(robot, q, qd))(q, qd))
+    """The library's twists, row by row (eager calls: one compiled kernel per robot)."""
+    return np.stack([np.asarray(jk.twist(robot, a, b)) for a, b in zip(q, qd, strict=True)])
 
 
 def test_velocities_configurations_csv_with_header_and_qd(capsys, in_tmp):
@@ -428,14 +458,15 @@ def test_velocities_configurations_csv_with_header_and_qd(capsys, in_tmp):
 
 def test_velocities_configurations_plain_csv_and_npz(capsys, in_tmp):
     robot = jk.robots.load("niryo_one", dtype="float64")
-    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, size=(7, 6))
+    # 500 rows: niryo_run's checked kernel (chunks of 500 rows) serves them
+    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, size=(500, 6))
     np.savetxt(in_tmp / "q.csv", q, delimiter=",")  # no header, q only: qd is sampled
     code, out, _ = run(capsys, "velocities", "--configurations", "q.csv", "--seed", "4",
                        "--output", "a.npz")  # fmt: skip
-    assert code == 0 and "7 from q.csv (qd uniform in [-1, 1]" in out and "seed 4" in out
+    assert code == 0 and "500 from q.csv (qd uniform in [-1, 1]" in out and "seed 4" in out
     a = load(in_tmp / "a.npz")
     np.testing.assert_array_equal(a["q"], q)
-    qd_expected = jk.sampling.sample_rows(robot, 7, 4, 1.0, np.float64)[1][0:7]
+    qd_expected = jk.sampling.sample_rows(robot, 500, 4, 1.0, np.float64)[1][0:500]
     np.testing.assert_array_equal(a["qd"], qd_expected)
     qd = -q
     np.savez(in_tmp / "qqd.npz", q=q, qd=qd)
@@ -444,8 +475,9 @@ def test_velocities_configurations_plain_csv_and_npz(capsys, in_tmp):
     b = load(in_tmp / "b.npz")
     np.testing.assert_array_equal(b["qd"], qd)
     np.testing.assert_allclose(b["twist"], twist_of(robot, q, qd), atol=1e-15)
-    np.savez(in_tmp / "one.npz", q=q[0])  # a single configuration (dof,)
-    code, out, _ = run(capsys, "velocities", "--configurations", "one.npz", "--no-output")
+    np.savez(in_tmp / "one.npz", q=np.array([0.3, -0.2]))  # a single configuration (dof,)
+    code, out, _ = run(capsys, "velocities", "two_link_planar", "--configurations", "one.npz",
+                       "--no-output")  # fmt: skip
     assert code == 0 and "1 from one.npz" in out
 
 
@@ -577,23 +609,25 @@ HANGING_URDF = """<?xml version="1.0"?>
 """
 
 
-def test_library_sampler_block_by_block(capsys, in_tmp):
+def test_library_sampler_block_by_block(niryo_run):
     robot = jk.robots.load("niryo_one", dtype="float64")
     block = jk.sampling.SAMPLE_BLOCK
-    q, qd = jk.sampling.sample_rows(robot, block + 10, 5, 0.5, np.float64)
-    key_q = jax.random.split(jax.random.key(5))[0]
+    q, qd = jk.sampling.sample_rows(robot, block + 10, 3, 0.5, np.float64)
+    key_q = jax.random.split(jax.random.key(3))[0]
     second = jk.sample_configurations(robot, block, jax.random.fold_in(key_q, 1))
     np.testing.assert_array_equal(q[block - 2 : block + 10][2:], second[:10])
     np.testing.assert_array_equal(q.tail(3)[0:4], q[3:7])
     assert np.all(np.abs(qd[0:100]) <= 0.5)
-    # a row depends on the seed and its index only, not on n or the chunk size
-    code, _, _ = run(capsys, "velocities", "--n", "1200", "--chunk-size", "64", "--seed", "5",
-                     "--output", "a.npz")  # fmt: skip
+    # a row depends on the seed and its index only, not on n or the chunk size (the shared run:
+    # seed 3, n = 2,001, chunks of 512; here n = block + 10)
+    code, _, path = niryo_run
     assert code == 0
-    np.testing.assert_array_equal(load(in_tmp / "a.npz")["q"], q[0:1200])
+    np.testing.assert_array_equal(load(path)["q"], q[0:NIRYO_N])
 
 
 def test_one_forward_pass_and_bounded_check(capsys, monkeypatch, in_tmp):
+    """What is counted is the kernel's passes and which rows are checked, whatever the robot: a
+    small one (three joints), world reference and zyz angles (not the defaults)."""
     calls = {"pass": 0, "fwd": 0}
     real_pass, real_fwd = jk.velocity.jacobian_pass, jk.velocity.jacobian_fwd
 
@@ -607,11 +641,11 @@ def test_one_forward_pass_and_bounded_check(capsys, monkeypatch, in_tmp):
 
     monkeypatch.setattr(jk.velocity, "jacobian_pass", counted_pass)
     monkeypatch.setattr(jk.velocity, "jacobian_fwd", counted_fwd)
-    robot = jk.robots.load("niryo_one", dtype="float64")
+    robot = jk.robots.load("cylindrical", dtype="float64")
     fn = jk.velocity.velocity_results(robot, None, "world", "zyz")
-    jax.make_jaxpr(fn)(np.zeros(6), np.zeros(6))
+    jax.make_jaxpr(fn)(np.zeros(3), np.zeros(3))
     assert calls == {"pass": 1, "fwd": 0}  # J, the twist and Ja from one forward pass
-    code, out, _ = run(capsys, "velocities", "--n", "1500", "--reference", "world",
+    code, out, _ = run(capsys, "velocities", "cylindrical", "--n", "1500", "--reference", "world",
                        "--representation", "zyz", "--output", "w.npz")  # fmt: skip
     assert code == 0 and "over the first 1,000 configurations  PASS" in out
     d = load(in_tmp / "w.npz")
@@ -642,7 +676,7 @@ def test_unbounded_limits_sampled_finite_and_frame_checks(capsys, in_tmp):
         match="frame 'sensor' of robot 'hanging' is not moved",
     )
     assert not (in_tmp / "s.npz").exists() and not any(p.startswith(".") for p in os.listdir())
-    code, out, err = run(capsys, "velocities", "hang.urdf", "--n", "20", "--output", "x.npz")
+    code, out, err = run(capsys, "velocities", "hang.urdf", "--n", "50", "--output", "x.npz")
     frame = jk.load_urdf(in_tmp / "hang.urdf").frame_names[-1]
     if code == 0:  # the default frame is moved by some joint and named in the summary
         assert str(load(in_tmp / "x.npz")["frame"]) in out and np.any(load(in_tmp / "x.npz")["J"])
