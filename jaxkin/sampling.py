@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_traced
+from ._jit import eager
 from .errors import JaxkinError
 from .model import Robot
 
@@ -99,7 +100,8 @@ def sample_configurations(robot: Robot, n: int, key: Any = 0, *, dtype: Any = No
       key: a ``jax.random`` key or an int seed (default 0): the same key gives the same samples.
       dtype: float32 or float64 (default: the robot's).
 
-    Works eagerly and inside ``jit``/``vmap`` (with a traced ``key``).
+    Works eagerly (one compiled program per robot, ``n`` and dtype, cached) and inside
+    ``jit``/``vmap`` (with a traced ``key``).
 
     >>> import jaxkin as jk
     >>> robot = jk.robots.load("puma560")
@@ -113,17 +115,27 @@ def sample_configurations(robot: Robot, n: int, key: Any = 0, *, dtype: Any = No
         raise JaxkinError(f"n must be a non-negative int (a number of configurations), got {n!r}.")
     if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
         key = jax.random.key(int(key))
-    dt = np.dtype(robot.dtype if dtype is None else dtype)
+    return _draw(robot, key, int(n), np.dtype(robot.dtype if dtype is None else dtype))
+
+
+def _draw_kernel(robot: Robot, key: Any, n: int, dt: np.dtype) -> jax.Array:
+    """The draw of :func:`sample_configurations` (arguments checked)."""
     lo, hi = sampling_bounds(robot)
     if robot.multi_dof_joints:
         key, key_rot = jax.random.split(key)
-    u = jax.random.uniform(key, (int(n), robot.nq), dtype=dt)
+    u = jax.random.uniform(key, (n, robot.nq), dtype=dt)
     lo_, hi_ = jnp.asarray(lo, dtype=dt), jnp.asarray(hi, dtype=dt)
     # lo + (hi - lo) u can round past hi; clip so that bounded joints stay within their limits
     qs = jnp.clip(lo_[None] + (hi_ - lo_)[None] * u, lo_[None], hi_[None])
     if not robot.multi_dof_joints:
         return qs
     return _rotations(robot, qs, key_rot, dt)
+
+
+_draw = eager(_draw_kernel, ("n", "dt"))
+"""Called eagerly, one compiled program per (robot, n, dtype), cached with jaxkin's other
+kernels (op by op, each ``jax.random`` primitive compiled on its own, 1-2 s per new shape);
+traced inline inside the caller's ``jit``/``vmap``."""
 
 
 def _rotations(robot: Robot, qs: jax.Array, key: Any, dt: Any) -> jax.Array:
