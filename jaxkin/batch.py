@@ -262,7 +262,7 @@ def chunked_map(
         with _target(out, traced.out_info, n) as (results, put):
             if n_chunks:
                 bar.note(f"compiling for chunks of {chunk:,} rows ...")
-                compiled = traced.lower().compile()
+                compiled = traced.lower().compile(compiler_options() or None)
             compile_seconds = time.perf_counter() - t0
             bar.start()
             t0 = time.perf_counter()
@@ -496,7 +496,8 @@ def _stream(
         host, rows = _check_inputs(item if isinstance(item, tuple) else (item,))
         got = [(np.dtype(a.dtype).name, tuple(a.shape[1:])) for a in host]
         if compiled is None:
-            compiled, signature = _trace(fn, host, chunk, mesh).lower().compile(), got
+            compiled = _trace(fn, host, chunk, mesh).lower().compile(compiler_options() or None)
+            signature = got
         elif got != signature:
             raise ShapeError(
                 f"stream_map: batch {index} has inputs (dtype, row shape) {got}, but fn was "
