@@ -35,6 +35,7 @@ from hypothesis import strategies as st
 from test_com import random_q  # numpy: no sampler compiled per (n, nq); the sampler is tested below
 
 import jaxkin as jk
+from bench.peers import PinocchioLayout
 from jaxkin.robots import example_robot_data as erd
 
 pin = pytest.importorskip("pinocchio")
@@ -47,47 +48,16 @@ ROBOTS = ["erd/solo12", "erd/simple_humanoid"] + (
 
 
 # ----------------------------------------------------------------------------- Pinocchio map
-class PinMap:
-    """jaxkin (q, v) <-> Pinocchio (q, v) of a model whose joints have jaxkin's names."""
+class PinMap(PinocchioLayout):
+    """jaxkin (q, v) <-> Pinocchio (q, v) of a model whose joints have jaxkin's names: the
+    bench's one mapping (``bench.peers.PinocchioLayout``, tested against Pinocchio's own
+    kinematics in test_bench_peers.py), with the model kept."""
 
     def __init__(self, robot: jk.Robot, model) -> None:
+        super().__init__(robot, model)
         self.model = model
-        self.q_src = np.zeros(model.nq, dtype=int)  # jaxkin q index of each Pinocchio q entry
-        self.v_src = np.zeros(model.nv, dtype=int)  # jaxkin v index of each Pinocchio v entry
-        qi = {n: i for i, n in enumerate(robot.joint_names)}
-        vi = {n: i for i, n in enumerate(robot.velocity_names)}
-        for jid in range(1, model.njoints):
-            name, joint = model.names[jid], model.joints[jid]
-            if joint.nq == 1:
-                self.q_src[joint.idx_q], self.v_src[joint.idx_v] = qi[name], vi[name]
-                continue
-            kind = joint.shortname()
-            if kind == "JointModelFreeFlyer":
-                qn = ["x", "y", "z", "qx", "qy", "qz", "qw"]  # Pinocchio: (x, y, z, w)
-                vn = ["vx", "vy", "vz", "wx", "wy", "wz"]
-            elif kind == "JointModelSpherical":
-                qn, vn = ["qx", "qy", "qz", "qw"], ["wx", "wy", "wz"]
-            else:
-                assert kind == "JointModelPlanar", kind
-                qn, vn = ["x", "y", "cos", "sin"], ["vx", "vy", "wz"]
-            for k, c in enumerate(qn):
-                self.q_src[joint.idx_q + k] = qi[f"{name}.{c}"]
-            for k, c in enumerate(vn):
-                self.v_src[joint.idx_v + k] = vi[f"{name}.{c}"]
-        assert sorted(self.q_src) == list(range(robot.nq))
-        assert sorted(self.v_src) == list(range(robot.nv))
 
-    def q(self, q):
-        return np.asarray(q)[self.q_src]
-
-    def v(self, v):
-        return np.asarray(v)[self.v_src]
-
-    def J(self, Jp):
-        """A Pinocchio (6, nv) matrix with jaxkin's column order."""
-        out = np.empty_like(Jp)
-        out[:, self.v_src] = Jp
-        return out
+    J = PinocchioLayout.columns_to_jaxkin  # a Pinocchio (6, nv) matrix in jaxkin's column order
 
 
 def same_configuration(robot: jk.Robot, a, b) -> float:
