@@ -15,14 +15,17 @@ Needs the ``notebooks`` extra (``pip install -e ".[notebooks]"``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import os
 import pathlib
 import sys
+from collections.abc import Iterator, Mapping
 
 import jupytext
 import nbclient
 import nbformat
+from nbclient.util import run_sync
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -87,17 +90,97 @@ def cells(nb: nbformat.NotebookNode) -> list[tuple[str, str]]:
     return [(c.cell_type, c.source.strip()) for c in nb.cells]
 
 
-def execute(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
-    """A copy of ``nb`` executed in ``notebooks/`` with ``notebooks/matplotlibrc`` (72 dpi figures);
-    raises on the first failing cell."""
-    nb = copy.deepcopy(nb)
-    nbclient.NotebookClient(
+# Run in a kernel before each notebook that follows another there (see :func:`execute`): what a
+# notebook can leave behind goes back to how a fresh kernel has it (the user's names, open figures,
+# matplotlib's settings, numpy's print options, JAX's float64 switch, the working directory).
+# Imported modules stay imported: that is the saving (jax, matplotlib, sympy, jaxkin: seconds).
+RESET_CELL = """\
+def reset_kernel():
+    import os, sys, types
+    import jax, matplotlib, matplotlib.pyplot as plt, numpy as np
+    if "fresh_kernel_state" not in sys.modules:  # the first run: the kernel is fresh
+        fresh = types.ModuleType("fresh_kernel_state")
+        fresh.printoptions = np.get_printoptions()
+        fresh.x64, fresh.cwd = jax.config.jax_enable_x64, os.getcwd()
+        sys.modules["fresh_kernel_state"] = fresh
+    fresh = sys.modules["fresh_kernel_state"]
+    plt.close("all")
+    matplotlib.rc_file_defaults()
+    np.set_printoptions(**fresh.printoptions)
+    jax.config.update("jax_enable_x64", fresh.x64)
+    os.chdir(fresh.cwd)
+
+
+reset_kernel()
+get_ipython().reset(new_session=True)"""
+
+
+def _client(nb: nbformat.NotebookNode, km=None) -> nbclient.NotebookClient:
+    return nbclient.NotebookClient(
         nb,
+        km=km,
         timeout=CELL_TIMEOUT_S,
         kernel_name="python3",
         record_timing=False,
         resources={"metadata": {"path": str(HERE)}},
-    ).execute(env={**os.environ, "MATPLOTLIBRC": str(HERE / "matplotlibrc")})
+    )
+
+
+def _env(extra: Mapping[str, str]) -> dict[str, str]:
+    return {**os.environ, "MATPLOTLIBRC": str(HERE / "matplotlibrc"), **extra}
+
+
+class Kernel:
+    """One kernel that runs notebooks one after the other (see :func:`execute`)."""
+
+    def __init__(self, env: Mapping[str, str]):
+        self.env = _env(env)
+        self.km = _client(nbformat.v4.new_notebook()).create_kernel_manager()
+
+    def run(self, nb: nbformat.NotebookNode) -> None:
+        """Execute ``nb`` here (the kernel starts with the first notebook)."""
+        client = _client(nb, self.km)
+        try:
+            client.execute(env=self.env)
+        finally:
+            if client.kc is not None:
+                client.kc.stop_channels()
+
+    def shutdown(self) -> None:
+        if self.km.has_kernel:
+            run_sync(self.km.shutdown_kernel)(now=True)
+
+
+@contextlib.contextmanager
+def kernel(env: Mapping[str, str] | None = None) -> Iterator[Kernel]:
+    """A :class:`Kernel` in ``notebooks/`` with the environment plus ``env``, shut down on
+    exit."""
+    shared = Kernel(env or {})
+    try:
+        yield shared
+    finally:
+        shared.shutdown()
+
+
+def execute(nb: nbformat.NotebookNode, shared: Kernel | None = None) -> nbformat.NotebookNode:
+    """A copy of ``nb`` executed in ``notebooks/`` with ``notebooks/matplotlibrc`` (72 dpi figures);
+    raises on the first failing cell.
+
+    Without ``shared``, in a kernel of its own (what :func:`main` does: the committed outputs
+    come from fresh kernels). With ``shared`` (from :func:`kernel`), in that kernel after
+    :data:`RESET_CELL`, which saves a kernel's start and imports per notebook (the tests); a
+    notebook that fails there shuts the kernel down, so that the next one starts afresh.
+    """
+    nb = copy.deepcopy(nb)
+    if shared is None:
+        _client(nb).execute(env=_env({}))
+        return nb
+    try:
+        shared.run(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(RESET_CELL)]))
+        shared.run(nb)
+    except BaseException:
+        shared.shutdown()
+        raise
     return nb
 
 

@@ -3,13 +3,22 @@
 notebooks/NN_name.py (jupytext percent format) is the source; notebooks/build.py turns it into
 NN_name.ipynb, executed, with outputs. Each notebook is executed once here; its cells are compared
 with the committed file's, and every cell that outputs something must have outputs committed.
+
+The notebooks run one after the other in one kernel (``build.kernel``; ``build.RESET_CELL`` clears
+what the previous one left: names, figures, print options, JAX's float64 switch), which saves
+each one a kernel's start and the imports of jax, matplotlib, sympy and jaxkin; ``python
+notebooks/build.py`` still runs each in a fresh kernel. The kernel compiles with XLA's faster
+options (``_xla.FAST_COMPILE`` as ``XLA_FLAGS``: no fast-math; about a third less CPU time for
+the compile-bound notebooks); the committed outputs come from the default ones.
 """
 
 import importlib.util
+import os
 import pathlib
 
 import nbformat
 import pytest
+from _xla import FAST_COMPILE
 
 pytest.importorskip("jupytext")
 pytest.importorskip("nbclient")
@@ -80,8 +89,41 @@ def test_install_cell_installs_from_the_checkout_or_a_wheel_never_by_name(monkey
     assert cmd[-1] == f"jaxkin[notebooks] @ {checkout.as_uri()}", cmd
 
 
+@pytest.fixture(scope="module")
+def kernel():
+    """One kernel for the notebooks of this file (see the module's docstring)."""
+    flags = [os.environ.get("XLA_FLAGS", "")]
+    flags += [f"--{name}={str(value).lower()}" for name, value in FAST_COMPILE.items()]
+    with build.kernel({"XLA_FLAGS": " ".join(flags).strip()}) as shared:
+        yield shared
+
+
+def test_a_notebook_finds_nothing_of_the_one_before_it_in_the_kernel(kernel):
+    def notebook(code: str) -> nbformat.NotebookNode:
+        return nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)])
+
+    # what a fresh kernel had, recorded by build.RESET_CELL before the first notebook
+    fresh = "sys.modules['fresh_kernel_state']"
+    leave = f"""\
+import os, sys, jax, matplotlib, numpy as np
+left_behind = 1
+jax.config.update("jax_enable_x64", not {fresh}.x64)
+np.set_printoptions(precision=2)
+matplotlib.rcParams["lines.linewidth"] = 9.0
+os.chdir("..")"""
+    find_nothing = f"""\
+import os, sys, jax, matplotlib, numpy as np
+assert "left_behind" not in globals()
+assert jax.config.jax_enable_x64 == {fresh}.x64
+assert np.get_printoptions()["precision"] != 2
+assert matplotlib.rcParams["lines.linewidth"] != 9.0
+assert os.getcwd() == {str(NOTEBOOK_DIR)!r}"""
+    build.execute(notebook(leave), kernel)
+    build.execute(notebook(find_nothing), kernel)
+
+
 @pytest.mark.parametrize("path", SOURCES, ids=lambda p: p.stem)
-def test_notebook_matches_its_source_runs_and_holds_its_outputs(path):
+def test_notebook_matches_its_source_runs_and_holds_its_outputs(path, kernel):
     committed = nbformat.read(path.with_suffix(".ipynb"), as_version=4)
     source = build.from_source(path)
     assert build.cells(committed) == build.cells(source), REBUILD.format(path.stem)
@@ -89,7 +131,7 @@ def test_notebook_matches_its_source_runs_and_holds_its_outputs(path):
     # raises CellExecutionError on the first failing cell, and nbclient's TimeoutError on a cell
     # still running after build.CELL_TIMEOUT_S (a watchdog for a hang, not a speed check: speed
     # is measured in bench/, never asserted as wall-clock time)
-    executed = build.execute(source)
+    executed = build.execute(source, kernel)
 
     for k, (ran, kept) in enumerate(zip(executed.cells, committed.cells, strict=True)):
         if ran.cell_type != "code":
