@@ -84,7 +84,8 @@ def inside(polygon, point):
     return bool(np.all(cross2(edges, point - polygon) >= 0))
 
 
-T_feet = np.asarray(jk.fk(robot, q0, frame=FEET))  # (2, 4, 4): two frames, one pass
+T0 = np.asarray(jk.fk(robot, q0, frame=[*FEET, HAND]))  # (3, 4, 4): three frames, one pass
+T_feet, T_hand0 = T0[:2], T0[2]  # the feet's poses (2, 4, 4), the hand's (4, 4)
 c0 = np.asarray(jk.center_of_mass(robot, q0))
 Jc = jk.com_jacobian(robot, q0)
 hull = support_polygon(T_feet)
@@ -116,7 +117,6 @@ print(np.asarray(Jc[:, :3]))
 
 # %%
 frames = [*FEET, HAND]
-T_hand0 = np.asarray(jk.fk(robot, q0, frame=HAND))
 reach = np.array([0.25, 0.0, 0.15])  # step 0: a jump of 29 cm from where the hand is
 angle = np.linspace(0, 2 * np.pi, 31)[1:, None]  # steps 1-30: a circle back to the same point
 circle = 0.1 * np.hstack([0 * angle, np.sin(angle), 1 - np.cos(angle)])
@@ -150,9 +150,9 @@ print("largest hand position error:", res.position_error[:, 2].max(), "m; centre
 # %%
 qs = res.q
 # one call per step: the kernels compiled above for one configuration (jk.center_of_mass for
-# c0, jk.fk for T_hand0) serve every step, with no new compile
+# c0, jk.fk of the three frames for T0) serve every step, with no new compile
 coms = np.stack([np.asarray(jk.center_of_mass(robot, q)) for q in qs])
-hands = np.stack([np.asarray(jk.fk(robot, q, frame=HAND))[:3, 3] for q in qs])
+hands = np.stack([np.asarray(jk.fk(robot, q, frame=frames))[2, :3, 3] for q in qs])
 
 fig, (top, side) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=(1.4, 1))
 for T in T_feet:
