@@ -6,16 +6,27 @@ default ("allow") there: examples are user code (``qs >= robot.lower`` broadcast
 batch), and the suite's strict setting is meant for the library's own arithmetic, which the other
 tests cover. The totals are pinned from below so that examples cannot disappear unnoticed: raise
 them when you add some.
+
+The examples of every module run in one fresh interpreter (a module fixture; each module's test
+reads its report), which compiles with XLA's faster options (``_xla.FAST_COMPILE`` as
+``XLA_FLAGS``: no fast-math; the examples' time is mostly compiling, and they halve it). It is
+configured as the suite is: float64, and warnings raised as errors (but the persistent
+compilation cache's, as in tests/conftest.py, and SyntaxWarning, as in pyproject.toml).
 """
 
 from __future__ import annotations
 
 import doctest
 import importlib
+import json
+import os
 import pkgutil
+import subprocess
+import sys
+import textwrap
 
-import jax
 import pytest
+from _xla import FAST_COMPILE
 
 import jaxkin
 
@@ -56,15 +67,64 @@ MODULES = _module_names()
 WITH_EXAMPLES = [name for name in MODULES if _doctests(name)]
 
 
-@pytest.mark.parametrize("name", WITH_EXAMPLES)
-def test_docstring_examples_run(name):
-    runner = doctest.DocTestRunner(optionflags=OPTIONFLAGS)
-    report: list[str] = []
+# Runs in the subprocess: {module: [examples failed, doctest's report]} for the modules read from
+# stdin, each module's examples in turn, as the suite runs tests (float64; warnings are errors,
+# except those pyproject.toml and tests/conftest.py let pass).
+_RUNNER = textwrap.dedent(
+    """
+    import doctest, importlib, json, sys, warnings
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    names, optionflags, ignored = json.loads(sys.stdin.read())
+    modules = [importlib.import_module(name) for name in names]
+    warnings.simplefilter("error")
+    for message in ignored:
+        warnings.filterwarnings("ignore", message=message, category=UserWarning)
+    warnings.filterwarnings("ignore", category=SyntaxWarning)
+    reports = {}
     with jax.numpy_rank_promotion("allow"):
-        for test in _doctests(name):
-            runner.run(test, out=report.append)
-    result = runner.summarize(verbose=False)
-    assert result.failed == 0, "".join(report)
+        for name, module in zip(names, modules):
+            runner = doctest.DocTestRunner(optionflags=optionflags)
+            report = []
+            for test in doctest.DocTestFinder().find(module, name):
+                if test.examples:
+                    runner.run(test, out=report.append)
+            reports[name] = [runner.summarize(verbose=False).failed, "".join(report)]
+    print("REPORTS " + json.dumps(reports))
+    """
+)
+# What tests/conftest.py lets pass (a persistent-cache entry read while another process writes it).
+IGNORED_WARNINGS = [
+    f"Error {verb} persistent compilation cache entry" for verb in ("reading", "writing")
+]
+
+
+@pytest.fixture(scope="module")
+def reports(request) -> dict[str, list]:
+    """The reports of the modules whose test this run selected (``-k``), from one subprocess."""
+    names = [
+        item.callspec.params["name"]
+        for item in request.session.items
+        if getattr(item, "originalname", None) == "test_docstring_examples_run"
+    ]
+    flags = [os.environ.get("XLA_FLAGS", "")]
+    flags += [f"--{name}={str(value).lower()}" for name, value in FAST_COMPILE.items()]
+    proc = subprocess.run(
+        [sys.executable, "-c", _RUNNER],
+        input=json.dumps([names or WITH_EXAMPLES, OPTIONFLAGS, IGNORED_WARNINGS]),
+        capture_output=True,
+        text=True,
+        env={**os.environ, "XLA_FLAGS": " ".join(flags).strip()},
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-6000:]
+    return json.loads(proc.stdout.rsplit("REPORTS ", 1)[1])
+
+
+@pytest.mark.parametrize("name", WITH_EXAMPLES)
+def test_docstring_examples_run(name, reports):
+    failed, report = reports[name]
+    assert failed == 0, report
 
 
 def test_number_of_examples():
