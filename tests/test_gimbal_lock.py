@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 from hypothesis import example, given
 from hypothesis import strategies as st
 
@@ -93,7 +94,7 @@ def _negative_zeros(R, where):
     return R
 
 
-_exp_log = jax.jit(lambda R: spatial.exp_so3(spatial.log_so3(R)))
+_exp_log = jax.jit(lambda R: spatial.exp_so3(spatial.log_so3(R)), compiler_options=FAST_COMPILE)
 
 
 def _noisy(R):
@@ -137,8 +138,11 @@ CONV = {
     "rpy": (spatial.matrix_to_rpy, spatial.rpy_to_matrix),
     "zyz": (spatial.matrix_to_zyz, spatial.zyz_to_matrix),
 }
-_JIT_ROUND_TRIP = {k: jax.jit(lambda R, f=f, g=g: g(f(R))) for k, (f, g) in CONV.items()}
-_JIT_FROM = {k: jax.jit(f) for k, (f, _) in CONV.items()}
+_JIT_ROUND_TRIP = {
+    k: jax.jit(lambda R, f=f, g=g: g(f(R)), compiler_options=FAST_COMPILE)
+    for k, (f, g) in CONV.items()
+}
+_JIT_FROM = {k: jax.jit(f, compiler_options=FAST_COMPILE) for k, (f, _) in CONV.items()}
 
 
 def _round_trip(kind, R, dtype, mode):
@@ -220,7 +224,8 @@ def test_vmap_over_locked_and_regular():
         ]
     )
     for f, g in CONV.values():
-        back = jax.jit(jax.vmap(lambda R, f=f, g=g: g(f(R))))(jnp.asarray(Rs))
+        back = jax.vmap(lambda R, f=f, g=g: g(f(R)))
+        back = jax.jit(back, compiler_options=FAST_COMPILE)(jnp.asarray(Rs))
         np.testing.assert_allclose(np.asarray(back), Rs, rtol=0, atol=1e-12)
 
 
@@ -291,7 +296,7 @@ def test_gradients_finite_at_and_near_lock(kind, dtype):
         J = jax.jacfwd(f)(pts[0 if kind == "rpy" else 2])
         assert J.shape == (3, 3, 3) and np.all(np.isfinite(np.asarray(J)))
     # ... and jitted at every point, exact lock and cos(pitch) / sin(theta) down to underflow
-    J = jax.jit(jax.vmap(jax.jacfwd(f)))(pts)
+    J = jax.jit(jax.vmap(jax.jacfwd(f)), compiler_options=FAST_COMPILE)(pts)
     assert J.shape == (len(pts), 3, 3, 3) and J.dtype == dtype
     assert np.all(np.isfinite(np.asarray(J)))
     w = jnp.asarray([0.3, -0.5, 0.8], dtype=dtype)
@@ -300,10 +305,11 @@ def test_gradients_finite_at_and_near_lock(kind, dtype):
         return jnp.sum(f(R0 @ spatial.exp_so3(t * w)))
 
     ts = jnp.asarray([0.0, 1e-12, 1e-6], dtype=dtype)
-    d = jax.jit(jax.vmap(jax.vmap(jax.grad(along_path), (0, None)), (None, 0)))(ts, pts)
+    d = jax.vmap(jax.vmap(jax.grad(along_path), (0, None)), (None, 0))
+    d = jax.jit(d, compiler_options=FAST_COMPILE)(ts, pts)
     assert d.shape == (len(pts), 3) and np.all(np.isfinite(np.asarray(d)))
     # and the round trip through the gradient-safe branches still rebuilds R
-    back = jax.jit(jax.vmap(lambda R: g(f(R))))(pts)
+    back = jax.jit(jax.vmap(lambda R: g(f(R))), compiler_options=FAST_COMPILE)(pts)
     np.testing.assert_allclose(np.asarray(back), np.asarray(pts), rtol=0, atol=TOL[dtype])
 
 
@@ -321,7 +327,7 @@ def test_round_trip_derivative_is_identity_near_lock():
             d_rt = jax.jvp(lambda t: g(f(path(t))), (0.0,), (1.0,))[1]
             return d_rt, jax.jvp(path, (0.0,), (1.0,))[1]
 
-        d_rt, d_R = jax.jit(jax.vmap(tangents))(R0s)
+        d_rt, d_R = jax.jit(jax.vmap(tangents), compiler_options=FAST_COMPILE)(R0s)
         np.testing.assert_allclose(np.asarray(d_rt), np.asarray(d_R), rtol=0, atol=1e-8)
 
 

@@ -6,10 +6,13 @@ where the closed forms divide 0 by 0, are finite and equal to the limits of thei
 Each check is one jitted ``vmap`` over a batch (a few compiles of 3x3 kernels, milliseconds to run).
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 
 from jaxkin import spatial
 
@@ -21,12 +24,14 @@ for _k, (_i, _j) in enumerate([(2, 1), (0, 2), (1, 0)]):
     VEE_JACOBIAN[_k, _i, _j], VEE_JACOBIAN[_k, _j, _i] = 0.5, -0.5
 
 
+@functools.cache  # one jit per kernel: a kernel used twice (same shapes) compiles once
 def _jit(fn):
-    return jax.jit(fn)  # one compile per kernel, not one per operation (eager op-by-op)
+    return jax.jit(fn, compiler_options=FAST_COMPILE)  # one compile, not one per operation
 
 
+@functools.cache
 def _jv(fn):
-    return jax.jit(jax.vmap(fn))
+    return jax.jit(jax.vmap(fn), compiler_options=FAST_COMPILE)
 
 
 def _random_rotations(n: int, seed: int) -> np.ndarray:

@@ -1,12 +1,14 @@
 """Spatial algebra: the chapter's skew-symmetric properties (Eqs. 4.4 - 4.12), rotations and their
 parameterisations, exp/log NaN-free at angle 0 and pi, adjoint, angular velocity (Eq. 4.18)."""
 
+import functools
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -90,7 +92,8 @@ def test_rdot_rt_skew_and_angular_velocity_addition(chain, t0):  # Eq. 4.18
     np.testing.assert_allclose(omega, summed, rtol=0, atol=1e-12 * len(chain))
 
 
-@jax.jit  # one program per chain length (op by op, every length compiles its own operations)
+# one program per chain length (op by op, every length compiles its own operations)
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _chain_velocities(ks, a, b, t0):
     """``(R, Rdot, omega, summed)`` of the chain ``R(t) = prod_i Rot(k_i, a_i + b_i t)`` at t0:
     the tangent by ``jax.jvp``, omega by ``spatial.angular_velocity`` and the sum of the relative
@@ -167,7 +170,8 @@ def test_exp_log_round_trip(axis, angle):
     )
 
 
-@jax.jit  # one program for every angle below (op by op, each derivative compiles its own ops)
+# one program for every angle below (op by op, each derivative compiles its own ops)
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _exp_log_derivatives(w):
     R = spatial.exp_so3(w)
     return dict(
