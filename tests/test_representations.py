@@ -1,11 +1,14 @@
 """Orientation representations: rate matrices B(phi), J_a = blkdiag(I, B^-1) J_g, singularities."""
 
+import functools
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _padded import padded
+from _xla import FAST_COMPILE
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -17,13 +20,24 @@ from jaxkin import spatial
 angles = st.tuples(*[st.floats(-3, 3, allow_nan=False, allow_subnormal=False)] * 3).map(np.array)
 
 
+@functools.cache  # one program per representation for every example (op by op costs more)
+def _rates(rep):
+    """``phi -> (B closed form, B by autodiff, omega of R(phi + t phidot) by jax.jvp, phidot)``."""
+    phidot = jnp.array([0.3, -0.7, 0.5])
+
+    def rates(phi):
+        omega = spatial.angular_velocity(lambda t: reps.to_matrix(phi + t * phidot, rep), 0.0)
+        return jk.rate_matrix(phi, rep), reps.rate_matrix_autodiff(phi, rep), omega, phidot
+
+    return jax.jit(rates, compiler_options=FAST_COMPILE)
+
+
 @pytest.mark.parametrize("rep", reps.REPRESENTATIONS)
 @given(phi=angles)
 def test_rate_matrix_closed_form_equals_autodiff(rep, phi):
     if rep == "rotvec":
         phi = phi / max(1.0, np.linalg.norm(phi) / 3.0)  # principal branch |w| <= 3
-    B = np.asarray(jk.rate_matrix(jnp.asarray(phi), rep))
-    B_ad = np.asarray(reps.rate_matrix_autodiff(jnp.asarray(phi), rep))
+    B, B_ad, _, _ = jax.device_get(_rates(rep)(jnp.asarray(phi)))
     np.testing.assert_allclose(B, B_ad, rtol=0, atol=1e-13)
 
 
@@ -32,13 +46,8 @@ def test_rate_matrix_closed_form_equals_autodiff(rep, phi):
 def test_angular_velocity_is_B_phi_dot(rep, phi):
     """omega of R(phi + t phidot) equals B(phi) phidot (spatial.angular_velocity is an independent
     route, through jax.jvp of the rotation itself)."""
-    phidot = jnp.array([0.3, -0.7, 0.5])
-    omega = spatial.angular_velocity(
-        lambda t: reps.to_matrix(jnp.asarray(phi) + t * phidot, rep), 0.0
-    )
-    np.testing.assert_allclose(
-        np.asarray(omega), np.asarray(jk.rate_matrix(jnp.asarray(phi), rep)) @ phidot, atol=1e-12
-    )
+    B, _, omega, phidot = jax.device_get(_rates(rep)(jnp.asarray(phi)))
+    np.testing.assert_allclose(omega, B @ phidot, atol=1e-12)
 
 
 def test_rate_matrix_singularities_and_margin():
@@ -62,10 +71,9 @@ def test_analytical_equals_blkdiag_Binv_geometric(rep, robot_q):
         Ja, margin = jk.analytical_jacobian(robot, q, rep, return_margin=True)
         phi = reps.from_matrix(jk.fk(robot, q)[:3, :3], rep)
         Jg = jk.geometric_jacobian(robot, q)
-        expected = jk.analytical_from_geometric(Jg, phi, rep)
-        Ja, margin, phi, Jg, expected, Ts = jax.device_get(
-            (Ja, margin, phi, Jg, expected, jk.fk_all(robot, q))
-        )
+        Ja, margin, phi, Jg, Ts = jax.device_get((Ja, margin, phi, Jg, jk.fk_all(robot, q)))
+        # column by column: on padded columns its operations compile once, not once per size
+        expected = padded(jk.analytical_from_geometric, Jg, phi, rep)
     margin = float(margin)
     if margin < 1e-3:
         return  # covered by the singularity tests below
@@ -98,7 +106,8 @@ def test_representation_singularity_eager_raises():
 def test_representation_singularity_under_vmap_is_flagged_never_silent():
     robot = _pitching_arm()
     qs = jnp.array([[0.3], [math.pi / 2], [math.pi / 2 - 1e-12], [-1.0]])
-    Ja = jax.jit(jax.vmap(lambda q: jk.analytical_jacobian(robot, q)))(qs)
+    Ja = jax.vmap(lambda q: jk.analytical_jacobian(robot, q))
+    Ja = jax.jit(Ja, compiler_options=FAST_COMPILE)(qs)
     finite = np.all(np.isfinite(np.asarray(Ja)), axis=(1, 2))
     np.testing.assert_array_equal(finite, [True, False, False, True])
     Ja2, margin = jax.vmap(lambda q: jk.analytical_jacobian(robot, q, return_margin=True))(qs)
