@@ -20,7 +20,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _sampling import sample_configurations
+from _sampling import random_q, sample_configurations
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
@@ -76,7 +76,8 @@ class Case:
 
 @functools.cache
 def oracle_case(key: str, frames: str = "all") -> Case:
-    """Load ``key`` in float64 and evaluate, at N_CONFIGS random configurations (fixed seed):
+    """Load ``key`` in float64 and evaluate, at N_CONFIGS random configurations within the limits
+    (``_sampling.random_q``, fixed seed):
     ``fk_all``, the geometric Jacobian of every frame in every reference (``frames="all"``), and
     the world_aligned point Jacobian at POINT of :func:`point_frames` (keys ``"<frame>/point"``).
     The frames' Jacobians come from one multi-frame call per reference (``frame=[...]``, which
@@ -86,7 +87,7 @@ def oracle_case(key: str, frames: str = "all") -> Case:
     path = case_path(key)
     robot = jk.load_urdf(path, dtype=np.float64)
     urdf = parse_urdf(path)
-    qs = sample_configurations(robot, N_CONFIGS, SEED)
+    qs = random_q(robot, N_CONFIGS, SEED)  # numpy: no sampler compiled per robot
     names = list(robot.frame_names) if frames == "all" else []
     pf = point_frames(robot)
 

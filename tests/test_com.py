@@ -22,35 +22,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import random_q
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
+from bench.peers import PinocchioLayout
 from jaxkin.build import select
 from jaxkin.robots import example_robot_data as erd
 from jaxkin.urdf import URDFError
 
 N = 4
-
-
-def random_q(robot: jk.Robot, n: int, seed: int = 0) -> np.ndarray:
-    """``n`` configurations in the limits (unbounded joints in [-pi, pi], free positions in
-    [-1, 1], unit quaternions, unit (cos, sin) pairs), in numpy: nothing to compile."""
-    rng = np.random.default_rng(seed)
-    lo = np.maximum(np.asarray(robot.lower, dtype=float), -np.pi)
-    hi = np.minimum(np.asarray(robot.upper, dtype=float), np.pi)
-    Q = rng.uniform(lo, hi, (n, robot.nq))
-    for j in robot.multi_dof_joints:
-        qi, kind = robot.q_index[j], robot.kinds[j]
-        quat = {"free": slice(qi + 3, qi + 7), "ball": slice(qi, qi + 4)}.get(kind)
-        if kind == "free":
-            Q[:, qi : qi + 3] = rng.uniform(-1.0, 1.0, (n, 3))
-        if quat is not None:
-            g = rng.normal(size=(n, 4))
-            Q[:, quat] = g / np.linalg.norm(g, axis=1, keepdims=True)
-        if kind == "planar":
-            a = rng.uniform(-np.pi, np.pi, n)
-            Q[:, qi + 2], Q[:, qi + 3] = np.cos(a), np.sin(a)
-    return Q
 
 
 # ----------------------------------------------------------------------------- Pinocchio
@@ -72,39 +53,18 @@ def pinocchio_case(name: str):
     return robot, model, qs, np.asarray(c), np.asarray(J)
 
 
-def pinocchio_columns(robot: jk.Robot, model) -> tuple[np.ndarray, np.ndarray]:
-    """For each Pinocchio q entry the jaxkin q index, and for each v entry the jaxkin v index."""
-    qi = {n: i for i, n in enumerate(robot.joint_names)}
-    vi = {n: i for i, n in enumerate(robot.velocity_names)}
-    q_src, v_src = np.zeros(model.nq, dtype=int), np.zeros(model.nv, dtype=int)
-    for jid in range(1, model.njoints):
-        name, joint = model.names[jid], model.joints[jid]
-        if joint.nq == 1:
-            q_src[joint.idx_q], v_src[joint.idx_v] = qi[name], vi[name]
-            continue
-        assert joint.shortname() == "JointModelFreeFlyer"
-        for k, c in enumerate(["x", "y", "z", "qx", "qy", "qz", "qw"]):  # Pinocchio: (x, y, z, w)
-            q_src[joint.idx_q + k] = qi[f"{name}.{c}"]
-        for k, c in enumerate(["vx", "vy", "vz", "wx", "wy", "wz"]):
-            v_src[joint.idx_v + k] = vi[f"{name}.{c}"]
-    assert sorted(q_src) == list(range(robot.nq)) and sorted(v_src) == list(range(robot.nv))
-    return q_src, v_src
-
-
 @pytest.mark.parametrize("name", ["erd/g1_29dof_rev_1_0", "erd/ur5_robot"])
 def test_center_of_mass_and_its_jacobian_match_pinocchio(name):
     pin = pytest.importorskip("pinocchio")
     robot, model, qs, c, J = pinocchio_case(name)
     data = model.createData()
-    q_src, v_src = pinocchio_columns(robot, model)
+    layout = PinocchioLayout(robot, model)  # the one jaxkin <-> Pinocchio (q, v) map
     assert robot.has_inertia
     np.testing.assert_allclose(float(robot.mass), pin.computeTotalMass(model), rtol=0, atol=1e-12)
     for k, q in enumerate(qs):
-        qp = q[q_src]
+        qp = layout.q(q)
         np.testing.assert_allclose(c[k], pin.centerOfMass(model, data, qp), rtol=0, atol=1e-12)
-        Jp = pin.jacobianCenterOfMass(model, data, qp)
-        Jm = np.empty_like(Jp)
-        Jm[:, v_src] = Jp
+        Jm = layout.columns_to_jaxkin(pin.jacobianCenterOfMass(model, data, qp))
         np.testing.assert_allclose(J[k], Jm, rtol=0, atol=1e-12)
 
 

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import random_q
 from _urdf_support import FULL_CORPUS
 from _xla import FAST_COMPILE, jaxpr_eqns, op_by_op
 from hypothesis import given
@@ -259,7 +260,7 @@ def humanoid(request):
     name = request.param
     robot = jk.robots.load(name, floating_base=True, dtype=np.float64)
     model = pin.buildModelFromUrdf(str(erd.path(name)), pin.JointModelFreeFlyer())
-    q = np.asarray(jk.sample_configurations(robot, 1, key=11))[0]
+    q = random_q(robot, 1, seed=11)[0]  # numpy: no sampler compiled per humanoid
     # both feet, both hands, the root link once more
     frames = [*robot.default_frames[-4:], robot.frame_names[1], robot.default_frames[-1]]
     with jax.disable_jit():  # op by op: no compile of a humanoid's kernel

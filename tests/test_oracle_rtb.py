@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _sampling import sample_configurations
+from _sampling import random_q
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
@@ -126,7 +126,7 @@ def case(request):
     """(name, zoo robot, configurations, jaxkin results as numpy) per robot, computed once."""
     name = request.param
     robot = jk.robots.load(name, dtype=np.float64)
-    qs = sample_configurations(robot, N_CONFIGS, SEED)
+    qs = random_q(robot, N_CONFIGS, SEED)  # numpy: no sampler compiled per robot
     flange = "link7" if robot.has_tool else None
     out = jax.tree_util.tree_map(np.asarray, _kernel(robot, jnp.asarray(qs), flange))
     return name, robot, qs, out

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _sampling import sample_configurations
+from _sampling import random_q
 from _xla import FAST_COMPILE, op_by_op
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -43,21 +43,13 @@ def _assert_same_poses(robot: jk.Robot, other: jk.Robot, qs: np.ndarray) -> None
     np.testing.assert_array_equal(np.asarray(other.upper), hi)
 
 
-def _configurations(robot: jk.Robot, n: int, seed: int) -> np.ndarray:
-    """``n`` configurations within the limits (unbounded joints in [-pi, pi]), drawn by numpy:
-    nothing compiled per number of joints."""
-    lo = np.maximum(np.asarray(robot.lower, dtype=float), -np.pi)
-    hi = np.minimum(np.asarray(robot.upper, dtype=float), np.pi)
-    return np.random.default_rng(seed).uniform(lo, hi, (n, robot.dof))
-
-
 @settings(max_examples=15)
 @given(st.one_of(testing.dh_robots(1, 8, dtype=np.float64), testing.tree_robots(1, 8, np.float64)))
 @op_by_op
 def test_property_round_trip_through_urdf(robot):
     """Each example's two robots are used once: op by op, nothing compiled per example."""
     back = jk.load_urdf(jk.to_urdf(robot), dtype=np.float64)
-    _assert_same_poses(robot, back, _configurations(robot, 4, 0))
+    _assert_same_poses(robot, back, random_q(robot, 4, seed=0))
 
 
 def test_zoo_robots_read_by_pinocchio():
@@ -67,8 +59,9 @@ def test_zoo_robots_read_by_pinocchio():
     for name in jk.robots.names():
         robot = jk.robots.load(name, dtype=np.float64)
         xml = jk.to_urdf(robot, prismatic_limit=2.0)
-        # one set of configurations (one shape) for both checks: the robot's kernel compiles once
-        qs = sample_configurations(robot, 5, 2)
+        # one set of configurations (one shape) for both checks: the robot's kernel compiles once;
+        # drawn by numpy (no sampler compiled per robot: the sampler is not under test here)
+        qs = random_q(robot, 5, seed=2)
         _assert_same_poses(robot, jk.load_urdf(xml, dtype=np.float64), qs)
         model = pin.buildModelFromXML(xml)
         data = model.createData()
@@ -106,7 +99,7 @@ def test_mimic_joints_base_and_tool_survive():
     assert '<link name="world"/>' in xml  # the base placement
     back = jk.load_urdf(xml, dtype=np.float64)
     assert back.joint_names == ("lead", "slide") and back.dof == 2
-    _assert_same_poses(robot, back, sample_configurations(robot, 5, 3))
+    _assert_same_poses(robot, back, random_q(robot, 5, seed=3))
 
 
 def test_continuous_joints_and_awkward_names():
