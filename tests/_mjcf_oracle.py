@@ -8,8 +8,11 @@ itself from the compiled model (it shares no code with jaxkin.mjcf)."""
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import mujoco
 import numpy as np
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 
@@ -81,18 +84,17 @@ def check(m, robot: jk.Robot, qs: np.ndarray, *, jac_frames=None, tol: float = 1
     jac_frames = [f for f in jac_frames if f in by_name] if robot.dof else []
     moved = 0.0
 
-    # Eager calls: compiled once per robot and frame by jaxkin's own cache (cheaper than a jit
-    # of a vmap here), the same numbers.
-    Ts_all = np.stack([np.asarray(jk.fk_all(robot, q), dtype=np.float64) for q in qs])
-    Js = {
-        f: np.stack(
-            [
-                np.asarray(jk.geometric_jacobian(robot, q, frame=f, point=POINT), np.float64)
-                for q in qs
-            ]
-        )
-        for f in jac_frames
-    }
+    # One program per robot, called per row: fk_all and one multi-frame Jacobian call (equal
+    # to single-frame calls stacked, bit for bit: test_multi_frame.py), compiled with the
+    # tests' options (the eager calls compiled one program per frame, with XLA's full passes).
+    def poses_and_jacobians(q):
+        Js = jk.geometric_jacobian(robot, q, frame=jac_frames, point=POINT) if jac_frames else ()
+        return jk.fk_all(robot, q), Js
+
+    kernel = jax.jit(poses_and_jacobians, compiler_options=FAST_COMPILE)
+    rows = [jax.tree_util.tree_map(np.asarray, kernel(jnp.asarray(q))) for q in qs]
+    Ts_all = np.stack([Ts for Ts, _ in rows]).astype(np.float64)
+    Js = {f: np.stack([J[i] for _, J in rows]).astype(np.float64) for i, f in enumerate(jac_frames)}
     root = robot.frame_names[0]  # "world", or the base body: poses and axes relative to it
     base = None if root == "world" else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, root)
     for row, q in enumerate(qs):

@@ -3,12 +3,14 @@
 Closed forms are derived by hand from Spong's DH tables (positions) and, for practice question 2,
 also checked symbolically with SymPy. Dimensions are drawn at random: the formulas hold for any.
 
-Cost: the properties draw a new robot per example (new dimensions, the same structure). Practice
-question 1's jaxkin calls run in one ``jax.jit`` kernel that takes the robot as a traced argument:
-compiled once for every example (jaxkin's eager calls close over the robot and compile once per
-example: 3.5x the CPU time there; elsewhere the eager calls cost no more than the traced kernel).
+Cost: the properties draw a new robot per example (new dimensions, the same structure). Their
+jaxkin calls (example 4.1.1, practice questions 1, 2 and 4, Eq. 4.3) run in one ``jax.jit``
+kernel per property that takes the robot as a traced argument: compiled once for every example
+(jaxkin's eager calls close over the robot and compile once per example and function: 1.6-3.5x
+the CPU time).
 """
 
+import functools
 import math
 
 import jax
@@ -16,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import sympy as sp
+from _xla import FAST_COMPILE
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -30,6 +33,11 @@ ATOL = 1e-12
 
 
 # --- Example 4.1.1: three-link cylindrical robot --------------------------------------------
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+def _pose_rpy_jacobian_and_twist(robot, q, qd):
+    return jk.fk(robot, q), jk.analytical_jacobian(robot, q, "rpy"), jk.twist(robot, q, qd)
+
+
 @given(length, angle, extension, extension, rate, rate, rate)
 def test_example_4_1_1_cylindrical(d1, t1, d2, d3, w1, v2, v3):
     robot = jk.robots.load("cylindrical", d1=d1)
@@ -39,7 +47,9 @@ def test_example_4_1_1_cylindrical(d1, t1, d2, d3, w1, v2, v3):
     T_expected = np.array(
         [[c1, 0, -s1, -s1 * d3], [s1, 0, c1, c1 * d3], [0, -1, 0, d1 + d2], [0, 0, 0, 1]]
     )
-    np.testing.assert_allclose(np.asarray(jk.fk(robot, q)), T_expected, atol=ATOL)
+    qd = np.array([w1, v2, v3])
+    T, Ja, V = (np.asarray(x) for x in _pose_rpy_jacobian_and_twist(robot, q, jnp.asarray(qd)))
+    np.testing.assert_allclose(T, T_expected, atol=ATOL)
     # analytical Jacobian of x = (-s1 d3, c1 d3, d1 + d2) w.r.t. (theta1, d2, d3); orientation
     # in rpy is (-pi/2, 0, theta1), so only d(yaw)/d(theta1) = 1.
     Ja_expected = np.array(
@@ -52,19 +62,17 @@ def test_example_4_1_1_cylindrical(d1, t1, d2, d3, w1, v2, v3):
             [1, 0, 0],
         ]
     )
-    Ja = np.asarray(jk.analytical_jacobian(robot, q, "rpy"))
     np.testing.assert_allclose(Ja, Ja_expected, atol=ATOL)
     # end-effector velocity (Eq. 4.2): xdot = J_a qdot
-    qd = np.array([w1, v2, v3])
     xdot = np.array([-c1 * d3 * w1 - s1 * v3, -s1 * d3 * w1 + c1 * v3, v2])
     np.testing.assert_allclose(Ja[:3] @ qd, xdot, atol=ATOL)
-    np.testing.assert_allclose(np.asarray(jk.twist(robot, q, qd))[:3], xdot, atol=ATOL)
+    np.testing.assert_allclose(V[:3], xdot, atol=ATOL)
     # geometric angular rows: omega = theta1_dot z0
-    np.testing.assert_allclose(np.asarray(jk.twist(robot, q, qd))[3:], [0, 0, w1], atol=ATOL)
+    np.testing.assert_allclose(V[3:], [0, 0, w1], atol=ATOL)
 
 
 # --- Practice question 1: two-link planar arm --------------------------------------------------
-@jax.jit
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _pose_rpy_and_geometric_jacobians(robot, q):
     return jk.fk(robot, q), jk.analytical_jacobian(robot, q, "rpy"), jk.geometric_jacobian(robot, q)
 
@@ -141,14 +149,19 @@ def test_practice_question_2_closed_form_matches_sympy():
         )
 
 
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+def _pose_and_geometric_jacobian(robot, q):
+    return jk.fk(robot, q), jk.geometric_jacobian(robot, q)
+
+
 @given(length, length, angle, extension, extension, angle, angle, angle)
 def test_practice_question_2_cylindrical_spherical_wrist(d1, d6, t1, d2, d3, t4, t5, t6):
     robot = jk.robots.load("cylindrical_spherical_wrist", d1=d1, d6=d6)
     assert robot.joint_kinds == ("revolute", "prismatic", "prismatic") + ("revolute",) * 3
     q = jnp.array([t1, d2, d3, t4, t5, t6])
-    p = np.asarray(jk.fk(robot, q))[:3, 3]
+    T, Jg = (np.asarray(x) for x in _pose_and_geometric_jacobian(robot, q))
+    p = T[:3, 3]
     np.testing.assert_allclose(p, _pq2_position(t1, d2, d3, t4, t5, d1, d6), atol=ATOL)
-    Jg = np.asarray(jk.geometric_jacobian(robot, q))
     np.testing.assert_allclose(Jg[:3], _pq2_jacobian(t1, d2, d3, t4, t5, d1, d6), atol=ATOL)
     # Table 4.1: prismatic columns have zero angular part
     np.testing.assert_array_equal(Jg[3:, 1:3], np.zeros((3, 2)))
@@ -163,10 +176,9 @@ def test_practice_question_4_rp_arm(d1, t1, d2):
     # z0 = (0, 0, 1), o0 = 0; z1 = (s1, -c1, 0); o2 = (s1 d2, -c1 d2, d1).
     # Column 1 (revolute): [z0 x (o2 - o0); z0]; column 2 (prismatic): [z1; 0].
     J_expected = np.array([[c1 * d2, s1], [s1 * d2, -c1], [0, 0], [0, 0], [0, 0], [1, 0]])
-    np.testing.assert_allclose(np.asarray(jk.geometric_jacobian(robot, q)), J_expected, atol=ATOL)
-    np.testing.assert_allclose(
-        np.asarray(jk.fk(robot, q))[:3, 3], [s1 * d2, -c1 * d2, d1], atol=ATOL
-    )
+    T, J = (np.asarray(x) for x in _pose_and_geometric_jacobian(robot, q))
+    np.testing.assert_allclose(J, J_expected, atol=ATOL)
+    np.testing.assert_allclose(T[:3, 3], [s1 * d2, -c1 * d2, d1], atol=ATOL)
 
 
 # --- Section 4.2 and practice question 3: kinds of rigid-body motion ----------------------------
@@ -209,13 +221,18 @@ def test_instantaneous_twist_classification():
     assert jk.classify_twist(np.zeros(6)) == "rest"
 
 
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+def _link1_twist_and_pose(robot, q, qd):
+    return jk.twist(robot, q, qd, frame="link1"), jk.fk(robot, q, frame="link1")
+
+
 @given(angle, rate, length)
 def test_eq_4_3_tangential_velocity_is_omega_cross_r(t1, w1, a1):
     """A point on a revolute link moves with v = omega x r (Eq. 4.3), |v| = |omega| |r|."""
     robot = jk.robots.load("two_link_planar", a1=a1, a2=0.5)
     q = jnp.array([t1, 0.0])
-    V = np.asarray(jk.twist(robot, q, jnp.array([w1, 0.0]), frame="link1"))
-    r = np.asarray(jk.fk(robot, q, frame="link1"))[:3, 3]
+    V, T = (np.asarray(x) for x in _link1_twist_and_pose(robot, q, jnp.array([w1, 0.0])))
+    r = T[:3, 3]
     np.testing.assert_allclose(V[:3], np.cross(V[3:], r), atol=ATOL)
     assert abs(np.linalg.norm(V[:3]) - abs(w1) * a1) < 1e-12
 

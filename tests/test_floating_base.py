@@ -11,7 +11,7 @@ Oracles:
   visits siblings in its own order: joints are matched by name.
 * URDF ``floating`` (below the root) and ``planar`` joints against Pinocchio's URDF parser.
 * ``jacobian_fwd`` (autodiff of ``fk(integrate(q, v))`` at ``v = 0``) against the hand-built
-  columns: independent of them.
+  columns: independent of them (solo12).
 * Hypothesis properties of ``integrate``/``difference`` on a small robot with every kind.
 
 Each robot compiles one jitted ``vmap`` over all its configurations (robots closed over): solo12
@@ -28,11 +28,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _sampling import random_q  # numpy: no sampler compiled per (n, nq); tested below
 from _urdf_support import FULL_CORPUS
-from _xla import FAST_COMPILE
+from _xla import FAST_COMPILE, sampler
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_com import random_q  # numpy: no sampler compiled per (n, nq); the sampler is tested below
 
 import jaxkin as jk
 from bench.peers import PinocchioLayout
@@ -45,6 +45,7 @@ N = 12
 ROBOTS = ["erd/solo12", "erd/simple_humanoid"] + (
     ["erd/a1", "erd/icub_reduced", "erd/talos_reduced"] if FULL_CORPUS else []
 )
+AUTODIFF_ROBOTS = ROBOTS[:1]  # jacobian_fwd through integrate is computed for these only
 
 
 # ----------------------------------------------------------------------------- Pinocchio map
@@ -101,13 +102,17 @@ def floating_case(name: str):
             "Ts": jk.fk_all(robot, q),
             "q1": jk.integrate(robot, q, v),
             "Jd": jk.jacobian_dot(robot, q, v, frame=foot, reference="local"),
-            "fwd": jk.jacobian_fwd(robot, q, frame=foot, reference="world"),
         }
+        if name in AUTODIFF_ROBOTS:  # the autodiff Jacobian's test (its own compile and trace)
+            out["fwd"] = jk.jacobian_fwd(robot, q, frame=foot, reference="world")
         out["d"] = jk.difference(robot, q, out["q1"])
-        for f in frames:  # every reference for a foot and the root link (compile time)
-            refs = REFS if f in (foot, robot.frame_names[1]) else ("world_aligned",)
-            for ref in refs:
-                out[f"{f}/{ref}"] = jk.geometric_jacobian(robot, q, frame=f, reference=ref)
+        # every reference for a foot and the root link, world_aligned for the others: one
+        # multi-frame pass per reference (equal to single-frame calls bit for bit, as
+        # test_multi_frame.py shows; a third of the program of one call per frame)
+        ends = [foot, robot.frame_names[1]]
+        for ref, fs in (("world_aligned", frames), ("local", ends), ("world", ends)):
+            Js = jk.geometric_jacobian(robot, q, frame=fs, reference=ref)
+            out.update({f"{f}/{ref}": Js[i] for i, f in enumerate(fs)})
         return out
 
     f = jax.jit(jax.vmap(one), compiler_options=FAST_COMPILE)
@@ -160,7 +165,7 @@ def test_integrate_difference_and_jacobian_dot_match_pinocchio(name):
         np.testing.assert_allclose(out["Jd"][k], Jd, atol=1e-11)
 
 
-@pytest.mark.parametrize("name", ROBOTS[:1])
+@pytest.mark.parametrize("name", AUTODIFF_ROBOTS)
 def test_autodiff_jacobian_through_integrate_matches_the_hand_built_one(name):
     robot, _, _, _, out, _ = floating_case(name)
     np.testing.assert_allclose(out["fwd"], out[f"{robot.default_frames[0]}/world"], atol=1e-13)
@@ -250,7 +255,7 @@ EVERY_KIND = jk.Robot.from_joints(
 ROBOT = EVERY_KIND
 
 
-@jax.jit
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _round_trip(q, v, q1):
     v_back = jk.difference(ROBOT, q, jk.integrate(ROBOT, q, v))
     q1_back = jk.integrate(ROBOT, q, jk.difference(ROBOT, q, q1))
@@ -260,7 +265,7 @@ def _round_trip(q, v, q1):
 h = 1e-6
 
 
-@jax.jit
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _twist_and_fd(q, v):
     V = jk.twist(ROBOT, q, v, reference="world_aligned")
     Tp = jk.fk(ROBOT, jk.integrate(ROBOT, q, v, dt=h))
@@ -338,7 +343,9 @@ def test_every_kind_layout_and_neutral():
 
 
 def test_sampled_configurations_lie_on_the_manifold():
-    qs = np.asarray(jk.sample_configurations(ROBOT, 200, key=1))
+    # jk.sample_configurations under one jit with the tests' compile options (its eager call
+    # compiles the same draw with XLA's default passes: 4x the CPU seconds)
+    qs = np.asarray(sampler(ROBOT, 200)(jax.random.key(1)))
     assert qs.shape == (200, 16)
     for s in (slice(3, 7), slice(7, 11), slice(14, 16)):
         np.testing.assert_allclose(np.linalg.norm(qs[:, s], axis=1), 1.0, atol=1e-12)

@@ -20,9 +20,14 @@ asserted to 1e-10.
 
 from __future__ import annotations
 
+import functools
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from _urdf_support import erd_root
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 from jaxkin.robots import example_robot_data as erd
@@ -50,6 +55,26 @@ def _rel(T_base, T):
     return np.linalg.inv(T_base) @ T
 
 
+REFS = ("world_aligned", "local", "world")
+
+
+@functools.cache
+def _program(robot: jk.Robot, frames: tuple[str, ...]):
+    """One compiled program per robot (cached; the same batch shape reuses it): at each row of
+    ``qs``, ``fk_all``, ``fk`` of ``frames`` (k, 4, 4) and their Jacobians {reference: (k, 6,
+    dof)} (one multi-frame call per reference, equal to single-frame calls bit for bit:
+    test_multi_frame.py)."""
+
+    def one(q):
+        Js = {
+            ref: jk.geometric_jacobian(robot, q, frame=list(frames), reference=ref) for ref in REFS
+        }
+        return jk.fk_all(robot, q), jk.fk(robot, q, frame=list(frames)), Js
+
+    run = jax.jit(jax.vmap(one), compiler_options=FAST_COMPILE)
+    return lambda qs: jax.tree_util.tree_map(np.asarray, run(jnp.asarray(qs)))
+
+
 PANDA_PAIRS = [
     ("base", "panda_link0"),
     *[(f"link{i}", f"panda_link{i}") for i in range(1, 7)],
@@ -64,28 +89,28 @@ def test_panda_dh_frames_are_urdf_links():
     assert urdf.joint_names[:7] == tuple(f"panda_joint{i}" for i in range(1, 8))
     np.testing.assert_array_equal(np.asarray(dh.lower), np.asarray(urdf.lower)[:7])
     np.testing.assert_array_equal(np.asarray(dh.upper), np.asarray(urdf.upper)[:7])
-    for k, q in enumerate(_configs(dh, N, 5)):
-        qu = np.concatenate([q, [0.02]])  # fingers half open; they carry no DH frame
-        Ts_d = np.asarray(jk.fk_all(dh, q))
-        Ts_u = np.asarray(jk.fk_all(urdf, qu))
+    qs = _configs(dh, N, 5)
+    qus = np.concatenate([qs, np.full((N, 1), 0.02)], axis=1)  # fingers half open: no DH frame
+    jac_pairs = PANDA_PAIRS[4:]  # the Jacobians of the coinciding frames from link4 on
+    Ts_D, T_D, J_D = _program(dh, (*(a for a, _ in jac_pairs), "link7"))(qs)
+    Ts_U, T_U, J_U = _program(urdf, (*(b for _, b in jac_pairs), "panda_link7"))(qus)
+    for k in range(N):
+        Ts_d, Ts_u = Ts_D[k], Ts_U[k]
         tol = 1e-12 * max(1.0, float(np.max(np.linalg.norm(Ts_d[:, :3, 3], axis=-1))))
         for a, b in PANDA_PAIRS:
             Td = Ts_d[dh.frame_names.index(a)]
             Tu = Ts_u[urdf.frame_names.index(b)]
             np.testing.assert_allclose(Td, Tu, rtol=0, atol=tol, err_msg=f"{a} vs {b}")
-        a, b = PANDA_PAIRS[4 + k % 5]  # the Jacobians of a few of the coinciding frames
-        for ref in ("world_aligned", "local", "world"):
-            Jd = np.asarray(jk.geometric_jacobian(dh, q, frame=a, reference=ref))
-            Ju = np.asarray(jk.geometric_jacobian(urdf, qu, frame=b, reference=ref))
-            np.testing.assert_allclose(Jd, Ju[:, :7], rtol=0, atol=tol, err_msg=f"{a} {ref}")
-            assert np.all(Ju[:, 7] == 0.0)  # the finger is on no DH frame's path
+        for i, (a, _) in enumerate(jac_pairs):
+            for ref in REFS:
+                Jd, Ju = J_D[ref][k, i], J_U[ref][k, i]
+                np.testing.assert_allclose(Jd, Ju[:, :7], rtol=0, atol=tol, err_msg=f"{a} {ref}")
+                assert np.all(Ju[:, 7] == 0.0)  # the finger is on no DH frame's path
         # panda_link7 sits 0.107 m behind the zoo's link7 (the flange) along its z axis.
-        T7 = np.asarray(jk.fk(urdf, qu, frame="panda_link7"))
+        T7 = T_U[k, -1]
         flange = np.eye(4)
         flange[2, 3] = 0.107
-        np.testing.assert_allclose(
-            T7 @ flange, np.asarray(jk.fk(dh, q, frame="link7")), rtol=0, atol=1e-12
-        )
+        np.testing.assert_allclose(T7 @ flange, T_D[k, -1], rtol=0, atol=1e-12)
 
 
 def test_ur5_dh_base_and_flange_are_urdf_base_and_tool0():
@@ -100,20 +125,21 @@ def test_ur5_dh_base_and_flange_are_urdf_base_and_tool0():
         "wrist_3_joint",
     )
     Rz_pi = np.diag([-1.0, -1.0, 1.0, 1.0])
-    for q in _configs(dh, N, 6):
-        T_base = np.asarray(jk.fk(urdf, q, frame="base"))
+    qs = _configs(dh, N, 6)
+    _, T_D, J_D = _program(dh, ("link6",))(qs)
+    _, T_U, J_U = _program(urdf, ("base", "tool0"))(qs)
+    for k in range(N):
+        T_base = T_U[k, 0]
         # Fixed, q-independent (the URDF's pi is 3.14159265359: 2e-12 short).
         np.testing.assert_allclose(T_base, Rz_pi, rtol=0, atol=PI_ROUNDING_TOL)
-        Td = np.asarray(jk.fk(dh, q, frame="link6"))
-        Tu = _rel(T_base, np.asarray(jk.fk(urdf, q, frame="tool0")))
+        Td = T_D[k, 0]
+        Tu = _rel(T_base, T_U[k, 1])
         np.testing.assert_allclose(Td, Tu, rtol=0, atol=PI_ROUNDING_TOL)
         # Jacobians of the flange: "local" is frame-intrinsic; "world_aligned" re-expressed in
         # the DH base axes (R = Rz(pi)).
-        Jd = np.asarray(jk.geometric_jacobian(dh, q, frame="link6", reference="local"))
-        Ju = np.asarray(jk.geometric_jacobian(urdf, q, frame="tool0", reference="local"))
+        Jd, Ju = J_D["local"][k, 0], J_U["local"][k, 1]
         np.testing.assert_allclose(Jd, Ju, rtol=0, atol=PI_ROUNDING_TOL)
-        Jd = np.asarray(jk.geometric_jacobian(dh, q, frame="link6"))
-        Ju = np.asarray(jk.geometric_jacobian(urdf, q, frame="tool0"))
+        Jd, Ju = J_D["world_aligned"][k, 0], J_U["world_aligned"][k, 1]
         R = Rz_pi[:3, :3]
         np.testing.assert_allclose(
             Jd, np.vstack([R.T @ Ju[:3], R.T @ Ju[3:]]), rtol=0, atol=PI_ROUNDING_TOL
@@ -124,9 +150,10 @@ def test_ur5_dh_joint_axes_are_the_urdf_joint_axes():
     dh = jk.robots.load("ur5", dtype=np.float64)
     urdf = whole("erd/ur5_robot")
     moving = [j for j, k in enumerate(urdf.kinds) if k != "fixed"]
-    for q in _configs(dh, 3, 7):
-        Ts_dh = np.asarray(jk.fk_all(dh, q))  # base, link1..link6
-        Ts_u = np.asarray(jk.fk_all(urdf, q))
+    # N configurations: the batch shape of the flange test, whose programs serve this one
+    Ts_DH, _, _ = _program(dh, ("link6",))(_configs(dh, N, 7))
+    Ts_URDF, _, _ = _program(urdf, ("base", "tool0"))(_configs(dh, N, 7))
+    for Ts_dh, Ts_u in zip(Ts_DH, Ts_URDF, strict=True):  # Ts_dh: base, link1..link6
         T_base = Ts_u[urdf.frame_names.index("base")]
         axis = np.asarray(urdf.axis)
         for i, j in enumerate(moving):
