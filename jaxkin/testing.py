@@ -424,6 +424,27 @@ def _fd_in(reference: str, Jv, Jw, p0, R0):
     return jnp.concatenate([Jv, Jw], axis=0)
 
 
+_ONE_SHOT_OPTIONS = {
+    "xla_backend_optimization_level": 0,
+    "xla_llvm_disable_expensive_passes": True,
+    "xla_cpu_parallel_codegen_split_count": 1,
+}
+
+
+@functools.cache
+def _one_shot_options() -> dict | None:
+    """Compiler options of a program that runs once (:func:`assert_jacobian_consistent`'s):
+    jaxkin's, plus XLA's cheapest backend passes (LLVM optimisation off), since compiling is
+    nearly all of its cost. No fast-math either way: the same IEEE operations, compiled less
+    cleverly. jaxkin's options alone if this XLA rejects these."""
+    options = {**compiler_options(), **_ONE_SHOT_OPTIONS}
+    try:
+        jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options=options)
+    except Exception:  # pragma: no cover - depends on the installed jaxlib
+        return compiler_options() or None
+    return options
+
+
 def assert_jacobian_consistent(
     robot: Robot,
     q: Any,
@@ -440,7 +461,8 @@ def assert_jacobian_consistent(
     float32, reach being the largest distance of a frame from the base. Finite differences run
     only in float64 (default: whenever x64 is on and the robot is float64). Everything is
     evaluated by one compiled program per call (one compile for a robot used once, as in a
-    property test over random robots), with the compiler options of jaxkin's own kernels.
+    property test over random robots), with jaxkin's compiler options and XLA's cheapest backend
+    passes (the program runs once: compiling is its cost).
     """
     fn = "jk.testing.assert_jacobian_consistent"
     q = check_q(robot, q, fn=fn, batch_hint=f"[{fn}(robot, q) for q in qs]")
@@ -466,7 +488,7 @@ def assert_jacobian_consistent(
             )
         return reach, out
 
-    program = jax.jit(values, compiler_options=compiler_options() or None)
+    program = jax.jit(values, compiler_options=_one_shot_options())
     reach, out = jax.device_get(program(q))
     reach = float(reach)
     tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from ._checks import check_q
+from ._jit import compiler_options
 from .errors import JaxkinError
 
 __all__ = [
@@ -82,7 +83,8 @@ def _poses(robot, qs: np.ndarray) -> np.ndarray:
 
     if qs.shape[0] == 1:
         return np.asarray(fk_all(robot, qs[0]), dtype=float)[None]
-    return np.asarray(jax.jit(jax.vmap(lambda q: fk_all(robot, q)))(qs), dtype=float)
+    run = jax.jit(jax.vmap(lambda q: fk_all(robot, q)), compiler_options=compiler_options() or None)
+    return np.asarray(run(qs), dtype=float)
 
 
 def _check_qs(robot, qs: Any, what: str = "q", batch: bool = False) -> np.ndarray:
@@ -495,9 +497,8 @@ def animate(
         qds = _check_qs(robot, qds, "qds", batch=True)
         if qds.shape != qs.shape:
             raise JaxkinError(f"qds must have the shape of qs {qs.shape}, got {qds.shape}.")
-        V = np.asarray(
-            jax.jit(jax.vmap(lambda q, qd: twist_fn(robot, q, qd, frame=frame)))(qs, qds)
-        )
+        twists = jax.vmap(lambda q, qd: twist_fn(robot, q, qd, frame=frame))
+        V = np.asarray(jax.jit(twists, compiler_options=compiler_options() or None)(qs, qds))
         top = float(np.max(np.linalg.norm(V[:, :3], axis=1)))
         if twist_scale is None:
             twist_scale = 0.3 * _reach(Ts) / top if top > 0 else 1.0
