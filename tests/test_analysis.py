@@ -189,16 +189,22 @@ def test_measures_rank_and_near_singular_flag():
 def test_velocity_and_force_ellipsoids():
     robot = jk.robots.load("puma560", dtype=np.float64)
     q = jnp.array([0.1, 0.7, -0.4, 0.3, 0.6, -0.2])
-    J = jk.geometric_jacobian(robot, q)
-    for rows, sl in (("translation", slice(0, 3)), ("rotation", slice(3, 6)), ("all", slice(0, 6))):
-        ve = jk.velocity_ellipsoid(J, rows)
-        fe = jk.force_ellipsoid(J, rows)
-        U, r = np.asarray(ve.axes), np.asarray(ve.radii)
-        Jr = np.asarray(J)[sl]
+    cases = (("translation", slice(0, 3)), ("rotation", slice(3, 6)), ("all", slice(0, 6)))
+
+    @jax.jit(compiler_options=FAST_COMPILE)  # one program (op by op: each SVD shape compiles)
+    def ellipsoids(q):
+        J = jk.geometric_jacobian(robot, q)
+        return J, {r: (jk.velocity_ellipsoid(J, r), jk.force_ellipsoid(J, r)) for r, _ in cases}
+
+    J, out = jax.tree_util.tree_map(np.asarray, ellipsoids(q))
+    for rows, sl in cases:
+        ve, fe = out[rows]
+        U, r = ve.axes, ve.radii
+        Jr = J[sl]
         np.testing.assert_allclose(U.T @ U, np.eye(len(r)), atol=1e-13)
         np.testing.assert_allclose(U @ np.diag(r**2) @ U.T, Jr @ Jr.T, atol=1e-13)
-        np.testing.assert_allclose(np.asarray(fe.radii), 1.0 / r, rtol=1e-12)
-        np.testing.assert_allclose(np.asarray(fe.axes), U, atol=0)
+        np.testing.assert_allclose(fe.radii, 1.0 / r, rtol=1e-12)
+        np.testing.assert_allclose(fe.axes, U, atol=0)
     # At a singularity the force ellipsoid has an infinite axis; its gradient stays finite.
     planar = jk.robots.load("two_link_planar", dtype=np.float64)
 
@@ -209,7 +215,8 @@ def test_velocity_and_force_ellipsoids():
 
     fe = jk.force_ellipsoid(jk.geometric_jacobian(planar, jnp.zeros(2)), rows=(0, 1))
     assert np.isinf(np.asarray(fe.radii)).sum() == 1
-    assert np.all(np.isfinite(np.asarray(jax.grad(radii_sum)(jnp.zeros(2)))))
+    grad = jax.jit(jax.grad(radii_sum), compiler_options=FAST_COMPILE)(jnp.zeros(2))
+    assert np.all(np.isfinite(np.asarray(grad)))
 
 
 def test_joint_torques_statics_and_power():

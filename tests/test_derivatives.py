@@ -255,7 +255,7 @@ def test_derivatives_finite_at_singular_configuration():
     q = jnp.zeros(2)  # stretched: singular
     qd = jnp.array([0.3, -0.7])
 
-    @jax.jit
+    @jax.jit(compiler_options=FAST_COMPILE)
     def kernel(q):
         g = jax.grad(lambda qq: jnp.sum(jk.jacobian_dot_qd(robot, qq, qd) ** 2))(q)
         return jk.jacobian_dot(robot, q, qd), jk.kinematic_hessian(robot, q), g
@@ -276,9 +276,10 @@ def test_analytical_jacobian_dot_at_representation_singularity():
     # zyz is singular for every planar pose (theta = 0): eager raises, jit gives NaN.
     with pytest.raises(jk.RepresentationSingularityError, match="zyz"):
         jk.analytical_jacobian_dot(robot, jnp.array([0.2, 0.3]), jnp.ones(2), "zyz")
-    out = jax.jit(lambda q: jk.analytical_jacobian_dot(robot, q, jnp.ones(2), "zyz"))(
-        jnp.array([0.2, 0.3])
-    )
+    out = jax.jit(
+        lambda q: jk.analytical_jacobian_dot(robot, q, jnp.ones(2), "zyz"),
+        compiler_options=FAST_COMPILE,
+    )(jnp.array([0.2, 0.3]))
     assert np.all(np.isnan(np.asarray(out)))
     Jad, margin = jk.analytical_jacobian_dot(
         robot, jnp.array([0.2, 0.3]), jnp.ones(2), "rpy", return_margin=True

@@ -8,12 +8,14 @@ rank-deficient, Jacobians; exact singular configurations for finiteness.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -47,8 +49,12 @@ def jacobians_and_twists(draw):
 # The properties draw J of up to 48 shapes: one small compiled program per shape costs less than
 # compiling each primitive of the solve per shape op by op (the eager call); finite inputs only,
 # so the eager refusals are not in play (they are tested in test_errors and test_nonfinite.py).
-_dls = jax.jit(lambda J, v, lam: jk.damped_least_squares(J, v, damping=lam))
-_adaptive = jax.jit(lambda J: jk.adaptive_damping(J, max_damping=0.1, threshold=0.3))
+_dls = jax.jit(
+    lambda J, v, lam: jk.damped_least_squares(J, v, damping=lam), compiler_options=FAST_COMPILE
+)
+_adaptive = jax.jit(
+    lambda J: jk.adaptive_damping(J, max_damping=0.1, threshold=0.3), compiler_options=FAST_COMPILE
+)
 
 
 @settings(max_examples=25)
@@ -138,7 +144,7 @@ def test_dls_smooth_and_finite_at_exact_singularity():
 
     q0 = jnp.zeros(2)  # stretched
     # compiled: one small program each (op by op, every primitive of the backward pass compiles)
-    g_q, g_lam = jax.jit(jax.grad(speed, argnums=(0, 1)))(q0, 0.1)
+    g_q, g_lam = jax.jit(jax.grad(speed, argnums=(0, 1)), compiler_options=FAST_COMPILE)(q0, 0.1)
     assert np.all(np.isfinite(np.asarray(g_q))) and np.isfinite(float(g_lam))
     qd = jk.damped_least_squares(jk.geometric_jacobian(planar, q0), v, damping=0.1)
     assert float(jnp.linalg.norm(qd)) <= 1.0 / 0.2
@@ -148,7 +154,8 @@ def test_dls_smooth_and_finite_at_exact_singularity():
             lambda q: jk.adaptive_damping(
                 jk.geometric_jacobian(planar, q)[:2], max_damping=0.1, threshold=0.5
             )
-        )
+        ),
+        compiler_options=FAST_COMPILE,
     )(q0)
     assert np.all(np.isfinite(np.asarray(g)))
 
@@ -157,24 +164,38 @@ def test_null_space_projection():
     robot = jk.robots.load("panda", dtype=np.float64)
     # (not "qr": there the self-motion is stationary for the manipulability, by symmetry)
     q = jnp.array([0.3, -0.5, 0.4, -2.0, 0.3, 1.5, 0.2])
-    J = jk.geometric_jacobian(robot, q)
     v = jnp.array([0.05, 0.0, -0.02, 0.0, 0.1, 0.0])
-    g = jk.manipulability_gradient(robot, q)
-    N = np.asarray(jk.null_space_projector(J, rcond=1e-10))
-    np.testing.assert_allclose(np.asarray(J) @ N, 0.0, atol=1e-13)
+
+    # one compiled program (op by op, the gradient's backward pass and every primitive of the
+    # solves compiled on their own; the eager refusals are tested in test_errors)
+    @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
+    def kernel(q, v):
+        J = jk.geometric_jacobian(robot, q)
+        g = jk.manipulability_gradient(robot, q)
+        # the secondary motion alone (v = 0)
+        qd0 = jk.null_space_velocity(J, jnp.zeros(6), g, rcond=1e-10)
+        return {
+            "J": J,
+            "g": g,
+            "N": jk.null_space_projector(J, rcond=1e-10),
+            "qd": jk.null_space_velocity(J, v, g, rcond=1e-10),
+            "qd0": qd0,
+            "m0": jk.manipulability(J),
+            "m1": jk.manipulability(jk.geometric_jacobian(robot, q + 1.0 * qd0)),
+            "qd_d": jk.null_space_velocity(J, v, g, damping=1e-4),  # damped
+        }
+
+    out = jax.tree_util.tree_map(np.asarray, kernel(q, v))
+    J, g, N, qd, qd0 = out["J"], out["g"], out["N"], out["qd"], out["qd0"]
+    np.testing.assert_allclose(J @ N, 0.0, atol=1e-13)
     np.testing.assert_allclose(N @ N, N, atol=1e-13)
-    qd = jk.null_space_velocity(J, v, g, rcond=1e-10)
-    np.testing.assert_allclose(np.asarray(J @ qd), np.asarray(v), atol=1e-13)
+    np.testing.assert_allclose(J @ qd, np.asarray(v), atol=1e-13)
     # the secondary motion alone (v = 0) leaves the tip still and raises the manipulability
-    qd0 = jk.null_space_velocity(J, jnp.zeros(6), g, rcond=1e-10)
-    np.testing.assert_allclose(np.asarray(J @ qd0), 0.0, atol=1e-13)
-    m0 = float(jk.manipulability(J))
-    m1 = float(jk.manipulability(jk.geometric_jacobian(robot, q + 1.0 * qd0)))
-    assert m1 > m0
+    np.testing.assert_allclose(J @ qd0, 0.0, atol=1e-13)
+    assert float(out["m1"]) > float(out["m0"])
     assert float(g @ qd0) > 0
     # damped variant: task error of order lambda^2
-    qd_d = jk.null_space_velocity(J, v, g, damping=1e-4)
-    assert float(jnp.max(jnp.abs(J @ qd_d - v))) < 1e-6
+    assert float(np.max(np.abs(J @ out["qd_d"] - np.asarray(v)))) < 1e-6
     with pytest.raises(jk.JaxkinError, match="exactly one of rcond"):
         jk.null_space_velocity(J, v, g)
 

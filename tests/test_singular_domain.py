@@ -79,20 +79,25 @@ def _rand(tag: str, shape, dtype) -> np.ndarray:
 def _evaluate(functions: dict, others: dict, derivatives: tuple[str, ...]) -> dict:
     """Values of ``functions`` (name -> (f, args), float outputs) and of ``others``, plus for
     each function the derivatives asked for: ``"grad"`` (a vector-Jacobian product per
-    argument) and ``"jvp"`` (a Jacobian-vector product along random tangents)."""
-    out = {name: f(*args) for name, (f, args) in functions.items()}
-    out.update(others)
+    argument) and ``"jvp"`` (a Jacobian-vector product along random tangents).
+
+    Both derivatives come from one ``jax.linearize`` of each function: its linear map is the
+    jvp, and the map's transpose the vector-Jacobian product (what ``jax.grad`` of ``vdot(w, f)``
+    computes), so f is traced twice (value, linearisation) instead of three times."""
+    out = {}
     for name, (f, args) in functions.items():
-        y = out[name]
+        out[name] = y = f(*args)  # the value as called (an SVD without vectors, ...)
+        if not derivatives:
+            continue
+        f_jvp = jax.linearize(f, *args)[1]
         if "grad" in derivatives:
             w = _rand(name, y.shape, y.dtype)
-            argnums = tuple(range(len(args)))
-            grads = jax.grad(lambda *a, f=f, w=w: jnp.vdot(w, f(*a)), argnums)(*args)
-            for i, g in enumerate(grads):
+            for i, g in enumerate(jax.linear_transpose(f_jvp, *args)(w)):
                 out[f"{name}/grad{i}"] = g
         if "jvp" in derivatives:
             tangents = tuple(_rand(f"{name}/{i}", a.shape, a.dtype) for i, a in enumerate(args))
-            out[f"{name}/jvp"] = jax.jvp(f, args, tangents)[1]
+            out[f"{name}/jvp"] = f_jvp(*tangents)
+    out.update(others)
     return out
 
 
