@@ -65,6 +65,7 @@ from ._checks import (
 )
 from ._forward import forward_pass
 from ._jacobian_pass import jacobian_pass
+from ._jit import eager
 from .errors import JaxkinError, ShapeError
 from .model import Robot
 from .spatial import safe_sqrt
@@ -398,12 +399,22 @@ def manipulability_gradient(
     idx = _row_indices(rows, 6, fn)
     guard = finite_guard(fn, q=q, point=pt)
     q, pt = guard.clean(q), None if pt is None else guard.clean(pt)
+    return guard(_manipulability_gradient(robot, q, f, pt, measure, idx, reference))
 
+
+def _manipulability_gradient_kernel(robot, q, frame, point, measure, idx, reference):
     def m(qq):
-        J = jacobian_pass(robot, qq, f, pt, reference).matrix()
+        J = jacobian_pass(robot, qq, frame, point, reference).matrix()
         return _manipulability(J if idx is None else J[jnp.array(idx)], measure)
 
-    return guard(jax.grad(m)(q))
+    return jax.grad(m)(q)
+
+
+# Eagerly one compiled program per robot and options (op by op, the gradient dispatched and
+# compiled hundreds of primitives); traced inline under the caller's jit/vmap/grad.
+_manipulability_gradient = eager(
+    _manipulability_gradient_kernel, ("frame", "measure", "idx", "reference")
+)
 
 
 # ----------------------------------------------------------------------------- ellipsoids
@@ -575,7 +586,7 @@ def wrist_centre(robot: Robot, q: Any, wrist_joints: Sequence[int | str] | None 
     q = check_q(robot, q, fn=fn)
     guard = finite_guard(fn, q=q)
     q = guard.clean(q)
-    return guard(_wrist_centre(forward_pass(robot, q), wrist_model))
+    return guard(_wrist_centre_eager(robot, q, wrist_model))
 
 
 def _wrist_centre(fp, wrist_model):
@@ -635,33 +646,11 @@ def wrist_decoupling(
     q = check_q(robot, q, fn=fn, batch_hint=f"jax.vmap(lambda q: {fn}(robot, q, threshold))(qs)")
     guard = finite_guard(fn, q=q, threshold=threshold)
     q = guard.clean(q)
-    g = jacobian_pass(robot, q, robot.frame_index(frame), None, "world_aligned")
-    J, p = g.matrix(), g.pose()[:3, 3]  # the frame's origin from the Jacobian's own pass
-    c, dist = _wrist_centre(forward_pass(robot, q), wrist_model)  # joint axes and origins
-    r = c - p
-    Jv_c = J[:3] + jnp.cross(J[3:].T, r).T  # omega x r per column
-    J11 = Jv_c[:, jnp.array(arm)]
-    J12 = Jv_c[:, jnp.array(wrist)]
-    J22 = J[3:, jnp.array(wrist)]
-    s11 = jnp.linalg.svd(J11, compute_uv=False)
-    s22 = jnp.linalg.svd(J22, compute_uv=False)
-    out = guard(
-        WristDecoupling(
-            det_J=jnp.linalg.det(J),
-            det_arm=jnp.linalg.det(J11),
-            det_wrist=jnp.linalg.det(J22),
-            sigma_min_arm=s11[-1],
-            sigma_min_wrist=s22[-1],
-            arm_singular=s11[-1] < threshold,
-            wrist_singular=s22[-1] < threshold,
-            wrist_centre=c,
-            coupling=jnp.max(jnp.abs(J12)),
-            axis_distance=dist,
-        )
-    )
+    f = robot.frame_index(frame)
+    out = guard(_decoupling(robot, q, f, threshold, arm, wrist, wrist_model))
     if check and not is_traced(robot, q):
         d = float(out.axis_distance)
-        scale = max(1.0, float(jnp.linalg.norm(c)))
+        scale = max(1.0, float(jnp.linalg.norm(out.wrist_centre)))
         if not d <= 1e-9 * scale:
             raise JaxkinError(
                 f"{fn}: the wrist axes of robot {robot.name!r} (joints "
@@ -671,3 +660,39 @@ def wrist_decoupling(
                 "analyse singular_values / dependent_columns of the full Jacobian instead."
             )
     return out
+
+
+def _decoupling_kernel(robot, q, frame, threshold, arm, wrist, wrist_model) -> WristDecoupling:
+    """The unguarded :class:`WristDecoupling` of checked arguments."""
+    g = jacobian_pass(robot, q, frame, None, "world_aligned")
+    J, p = g.matrix(), g.pose()[:3, 3]  # the frame's origin from the Jacobian's own pass
+    c, dist = _wrist_centre(forward_pass(robot, q), wrist_model)  # joint axes and origins
+    r = c - p
+    Jv_c = J[:3] + jnp.cross(J[3:].T, r).T  # omega x r per column
+    J11 = Jv_c[:, jnp.array(arm)]
+    J12 = Jv_c[:, jnp.array(wrist)]
+    J22 = J[3:, jnp.array(wrist)]
+    s11 = jnp.linalg.svd(J11, compute_uv=False)
+    s22 = jnp.linalg.svd(J22, compute_uv=False)
+    return WristDecoupling(
+        det_J=jnp.linalg.det(J),
+        det_arm=jnp.linalg.det(J11),
+        det_wrist=jnp.linalg.det(J22),
+        sigma_min_arm=s11[-1],
+        sigma_min_wrist=s22[-1],
+        arm_singular=s11[-1] < threshold,
+        wrist_singular=s22[-1] < threshold,
+        wrist_centre=c,
+        coupling=jnp.max(jnp.abs(J12)),
+        axis_distance=dist,
+    )
+
+
+def _wrist_centre_kernel(robot, q, wrist_model):
+    return _wrist_centre(forward_pass(robot, q), wrist_model)
+
+
+# Eagerly one compiled program per robot and joints (op by op, each call dispatched the forward
+# pass's primitives); traced inline under the caller's jit/vmap/grad.
+_wrist_centre_eager = eager(_wrist_centre_kernel, ("wrist_model",))
+_decoupling = eager(_decoupling_kernel, ("frame", "arm", "wrist", "wrist_model"))
