@@ -30,7 +30,7 @@ from ._forward import (
     frame_poses,
     scalar_pass,
     scan_joints,
-    scan_pass,
+    scan_steps,
     shared_scalar_pass,
 )
 from .configuration import integrate_kernel
@@ -46,6 +46,7 @@ __all__ = [
     "geometric_pass",
     "jacobian_pass",
     "jacobians_pass",
+    "scan_jacobian_pass",
     "world_jacobian_pass",
 ]
 
@@ -196,9 +197,8 @@ def jacobian_pass(
     ``q`` must be checked (``jk.geometric_jacobian`` and ``jk.jacobians.frame_jacobian`` are the
     checked entry points); nothing is checked again here, so solvers call it inside their loops.
     """
-    path = scan_joints(robot, frame)
-    if path is not None:
-        return _jacobian_pass_scan(robot, q, frame, path, point, reference)
+    if scan_joints(robot, frame) is not None:
+        return scan_jacobian_pass(robot, q, frame, point, reference)
     sp = scalar_pass(robot, q, frames=(frame,), materialise_trig=True)
     root = free_root(robot, frame)
     rp = None
@@ -350,7 +350,7 @@ def jacobians_pass(
     for i, f in enumerate(frames):
         pt = None if points is None else points[i]
         if scan_joints(robot, f) is not None:
-            each.append(jacobian_pass(robot, q, f, pt, reference))
+            each.append(scan_jacobian_pass(robot, q, f, pt, reference))
         else:
             rp = relative.get(roots[f])
             each.append(_unrolled_jacobian(robot, sp, f, pt, reference, rp))
@@ -372,30 +372,102 @@ def geometric_pass(
     return jacobian_pass(robot, q, frame, point, reference)
 
 
-def _jacobian_pass_scan(robot: Robot, q, frame: int, path, point, reference: str):
-    """Table 4.1 vectorised over the joints of a long path (see ``_forward.scan_pass``)."""
+def scan_jacobian_pass(
+    robot: Robot, q: jax.Array, frame: int, point: jax.Array | None, reference: str
+) -> FrameJacobian:
+    """:func:`jacobian_pass` through the ``lax.scan`` forward pass along ``frame``'s path
+    (:func:`~jaxkin._forward.scan_steps`; the path of 1-dof and fixed joints only): the kernel
+    of long paths (:func:`~jaxkin._forward.scan_joints`), and for any such path the twin the
+    unrolled kernel is tested against. Table 4.1 vectorised over the path's joints: each entry
+    of the columns one (m,) array ((m, N) under ``vmap``), elementwise, the columns placed at
+    their velocity indices statically. Unchecked."""
+    path = robot.ancestors(frame)
     is_tool = robot.has_tool and frame == robot.n_joints + 1
-    fp = scan_pass(robot, q, path, tool=is_tool)
-    dtype = fp.p.dtype
-    R, p = fp.R[-1], fp.p[-1]
-    target = p if point is None else p + R @ point.astype(dtype)
+    sp = scan_steps(robot, q, path, tool=is_tool)
+    dtype = sp.dtype
+    R, p = sp.R, sp.p
+    target = p
+    if point is not None:
+        pt = point.astype(dtype)
+        target = fold.vadd(p, fold.matvec(R, tuple(pt[i] for i in range(3))))
     path = np.asarray(path, dtype=np.int64)
     kinds = np.array(robot.kinds, dtype=object)[path]
-    rev = jnp.asarray(kinds == "revolute", dtype=dtype)[:, None]
-    pri = jnp.asarray(kinds == "prismatic", dtype=dtype)[:, None]
+    rev, pri = kinds == "revolute", kinds == "prismatic"
+    lever = fold.cross(sp.z, fold.vsub(target, sp.o))
+    cols_v = tuple(_by_kind(rev, pri, lever[i], sp.z[i]) for i in range(3))
+    cols_w = tuple(_by_kind(rev, None, sp.z[i], None) for i in range(3))
     m = robot.multiplier
-    mult = (m[path] if is_traced(m) else jnp.asarray(np.asarray(m)[path])).astype(dtype)[:, None]
-    cols_v = mult * (rev * jnp.cross(fp.z, target[None, :] - fp.o) + pri * fp.z)  # (len, 3)
-    cols_w = mult * rev * fp.z
-    moving = kinds != "fixed"
+    if is_traced(m) or np.any(np.asarray(m, dtype=np.float64)[path] != 1.0):
+        mult = (m[path] if is_traced(m) else jnp.asarray(np.asarray(m)[path])).astype(dtype)
+        cols_v = tuple(c * mult for c in cols_v)
+        cols_w = tuple(c * mult for c in cols_w)
+    moving = np.nonzero(kinds != "fixed")[0]
     vidx = np.array(robot.v_index, dtype=np.int64)[path][moving]  # 1-dof joints only here
-    Jv = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_v[moving]).T
-    Jw = jnp.zeros((robot.nv, 3), dtype=dtype).at[vidx].add(cols_w[moving]).T
+    Jv = _place_columns(cols_v, moving, vidx, robot.nv, dtype)
+    Jw = _place_columns(cols_w, moving, vidx, robot.nv, dtype)
     if reference == "local":
-        Jv, Jw = R.T @ Jv, R.T @ Jw
+        Rt = fold.transpose(R)
+        Jv, Jw = fold.matvec(Rt, Jv), fold.matvec(Rt, Jw)
     elif reference == "world":
-        Jv = Jv + spatial.skew(target) @ Jw
-    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=dtype)
+        Jv = fold.vadd(Jv, fold.cross(target, Jw))
+    st = lambda x: fold.stack_matrix(x, dtype)  # noqa: E731
+    return FrameJacobian(Jv=st(Jv), Jw=st(Jw), R=st(R), p=st(p), dtype=dtype)
+
+
+def _by_kind(rev: np.ndarray, pri: np.ndarray | None, if_rev, if_pri):
+    """Per path joint: ``if_rev`` for revolute joints, ``if_pri`` for prismatic ones (None:
+    zero), zero for fixed ones; selected statically (no arithmetic on the flags)."""
+    if rev.all():
+        return if_rev
+    if if_pri is None or not pri.any():
+        return jnp.where(jnp.asarray(rev), if_rev, 0.0)
+    return jnp.where(jnp.asarray(rev), if_rev, jnp.where(jnp.asarray(pri), if_pri, 0.0))
+
+
+PLACED_RUNS = 8
+"""At most this many runs of columns (consecutive path joints at consecutive velocity indices,
+or zero columns) are placed as slices and zeros blocks; more (a long path with fixed joints
+between its moving ones) are one gather per row, so the program does not grow with the path."""
+
+
+def _place_columns(cols: tuple, moving: np.ndarray, vidx: np.ndarray, nv: int, dtype) -> tuple:
+    """Rows (3 entries, each (nv,)) of the columns ``cols`` (per path joint, (m,) each) placed at
+    velocity indices ``vidx`` (of the path joints ``moving``): runs of consecutive columns are
+    slices and the others static zeros blocks, so the assembly fuses into the kernel (beyond
+    :data:`PLACED_RUNS` runs: one gather of a zero-padded row); a velocity index shared by two
+    joints (a mimic joint) adds its columns (a scatter-add)."""
+    if len(np.unique(vidx)) != len(vidx):
+        return tuple(
+            jnp.zeros((nv,), dtype).at[vidx].add(jnp.asarray(c, dtype)[moving]) for c in cols
+        )
+    src = np.full(nv, -1, dtype=np.int64)
+    src[vidx] = moving
+    runs: list = []  # (first source or -1, length)
+    for k in range(nv):
+        s = int(src[k])
+        if runs:
+            s0, n = runs[-1]
+            if (s0 < 0 and s < 0) or (s0 >= 0 and s == s0 + n):
+                runs[-1] = (s0, n + 1)
+                continue
+        runs.append((s, 1))
+    if len(runs) > PLACED_RUNS:
+        return tuple(_gathered(c, src, dtype) for c in cols)
+    return tuple(_concatenated(c, runs, dtype) for c in cols)
+
+
+def _gathered(c, src: np.ndarray, dtype) -> jax.Array:
+    """``c[src]`` with a zero where ``src`` is -1: one gather of the zero-padded row."""
+    padded = jnp.concatenate([c, jnp.zeros((1,), dtype)])
+    return padded[np.where(src < 0, c.shape[0], src)]
+
+
+def _concatenated(c, runs: list, dtype) -> jax.Array:
+    """The row of ``runs`` (first source or -1 for zeros, length): slices and zeros blocks."""
+    parts = [jnp.zeros((n,), dtype) if s < 0 else c[s : s + n] for s, n in runs]
+    if not parts:
+        return jnp.zeros((0,), dtype)
+    return parts[0] if len(parts) == 1 else jnp.concatenate(parts)
 
 
 def _pose_fn(robot: Robot, frame: int, point: jax.Array | None):
