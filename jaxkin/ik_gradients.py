@@ -110,12 +110,25 @@ def full_rank(J: jax.Array, held: jax.Array, rows: jax.Array | None = None) -> j
         r = jnp.minimum(m, jnp.sum(~held))
         ok = (r >= 1) & (s[jnp.maximum(r - 1, 0)] ** 2 > tau) if n >= 1 else False
         return ok & (fro2 > 0) & jnp.all(jnp.isfinite(J))
-    wide = jnp.sum(~held) >= J.shape[0]  # the 6 x 6 Gram J_f J_f^T decides
-    G = Jf @ Jf.T - tau * jnp.eye(J.shape[0], dtype=dtype)
+    if n < 1:
+        return jnp.zeros((), bool)
+    m = J.shape[0]
+    wide = jnp.sum(~held) >= m  # the m x m Gram J_f J_f^T decides
+    G = Jf @ Jf.T - tau * jnp.eye(m, dtype=dtype)
     # Otherwise the Gram of the free columns; held ones get a diagonal that cannot fail.
     H = Jf.T @ Jf + jnp.diag(jnp.where(held, 2 * fro2 + 1, -tau)).astype(dtype)
-    ok = jnp.where(wide, _pivots_positive(G), _pivots_positive(H)) if n >= 1 else False
+    ok = _pivots_positive(jnp.where(wide, _padded(G, n), _padded(H, m)))
     return ok & (fro2 > 0) & jnp.all(jnp.isfinite(J))
+
+
+def _padded(A: jax.Array, size: int) -> jax.Array:
+    """``A`` (k, k) as the leading block of a (max(k, size),) square matrix with 1 on the rest
+    of the diagonal: its Cholesky pivots are those of ``A`` (the same operations, bit for bit),
+    then 1s. One factorisation then decides for either Gram matrix (:func:`full_rank`)."""
+    k = A.shape[0]
+    if size <= k:
+        return A
+    return jnp.eye(size, dtype=A.dtype).at[:k, :k].set(A)
 
 
 def damped_pinv_apply(J: jax.Array, held: jax.Array, b: jax.Array) -> jax.Array:

@@ -18,12 +18,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
-from _xla import FAST_COMPILE, sampler
+from _xla import FAST_COMPILE, jaxpr_counts, sampler
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import jaxkin as jk
+from jaxkin.ik_gradients import full_rank
 
 B = 300  # every call of a solver: one batch shape, one compile
 H = 1e-5
@@ -444,3 +445,29 @@ def test_float32_jacrev_under_jit_and_vmap(solvers):
     assert np.all(sol.converged)
     scale = np.max(np.abs(dq64))
     np.testing.assert_allclose(dq32, dq64, rtol=0, atol=1e-3 * scale)
+
+
+# ----------------------------------------------------------------------------- the rank test
+def test_full_rank_factorises_one_gram_matrix():
+    """``full_rank`` (the ``singular`` flag of every solve) factorises one Gram matrix, padded
+    to max(m, n): it unrolled both the 6 x 6 and the n x n Cholesky (13 square roots for a 6 x 7
+    Jacobian instead of 7), about half a CPU second of every solver's build. The decisions, on both
+    sides of the switch between the two (5 or 7 free columns), match the singular values'."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(6, 7))
+    none, two = np.zeros(7, bool), np.arange(7) >= 5
+    assert jaxpr_counts(full_rank, J, none)["sqrt"] == 7
+    equal_cols = J.copy()
+    equal_cols[:, 1] = equal_cols[:, 0]
+    equal_rows = J.copy()
+    equal_rows[5] = equal_rows[4]
+    cases = [(J, none), (J, two), (equal_cols, none), (equal_cols, two)]
+    cases += [(equal_rows, none), (equal_rows, two)]
+    rank = jax.jit(jax.vmap(full_rank), compiler_options=FAST_COMPILE)
+    got = np.asarray(rank(np.stack([c[0] for c in cases]), np.stack([c[1] for c in cases])))
+    for (Ji, held), ok in zip(cases, got, strict=True):
+        s = np.linalg.svd(Ji[:, ~held], compute_uv=False)
+        r = min(6, int(np.sum(~held)))
+        want = s[r - 1] ** 2 > np.finfo(float).eps * np.sum(Ji[:, ~held] ** 2)
+        assert ok == want, (held, s)
+    np.testing.assert_array_equal(got, [True, True, True, False, False, True])
