@@ -151,8 +151,12 @@ def _bind(kernel: Callable, robot: Any, static: dict, n: int) -> Callable:
 
 
 def _device(arrays: tuple) -> tuple:
-    """Host arrays (``check_q(..., host=True)``) as JAX arrays, for kernels run op by op."""
-    return tuple(jnp.asarray(a) if isinstance(a, np.ndarray) else a for a in arrays)
+    """Host arrays (``check_q(..., host=True)``) as JAX arrays, for kernels run op by op or
+    traced inline. Outside a trace by ``jax.device_put`` of a copy: ``jnp.asarray`` of a numpy
+    array there runs a ``stage`` primitive that JAX compiles once per shape and dtype."""
+    if inside_trace():
+        return tuple(jnp.asarray(a) if isinstance(a, np.ndarray) else a for a in arrays)
+    return tuple(jax.device_put(np.array(a)) if isinstance(a, np.ndarray) else a for a in arrays)
 
 
 def _jit_disabled() -> bool:

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._traces import is_traced
+from ._traces import inside_trace, is_traced
 from .errors import JaxkinPrecisionWarning, ModelError, NoDefaultFrameError, ShapeError
 
 __all__ = [
@@ -105,7 +105,44 @@ _STRUCTURE = {"leaf": False}  # field metadata: a hashable Python value, part of
 
 def _as_leaf(x: Any) -> Any:
     """Arrays handed to a robot become immutable JAX arrays (an independent copy for numpy)."""
-    return jnp.array(x) if isinstance(x, (np.ndarray, list, tuple, float, int)) else x
+    if isinstance(x, np.ndarray):
+        return _from_host(x)
+    return jnp.array(x) if isinstance(x, (list, tuple, float, int)) else x
+
+
+def _from_host(a: np.ndarray) -> Any:
+    """``jnp.array(a)`` (a copy; the same dtype, canonicalised by JAX's x64 setting, and
+    placement): outside a trace by ``jax.device_put`` of a copy, since ``jnp.array`` of a numpy
+    array there runs a ``stage`` primitive that JAX compiles once per shape and dtype (a robot
+    of a new size would compile one program per leaf); inside a trace ``jnp.array`` itself (a
+    constant of the traced program)."""
+    if inside_trace():
+        return jnp.array(a)
+    return jax.device_put(np.array(a))
+
+
+def _cast(x: Any, dtype: Any) -> Any:
+    """``jnp.asarray(x, dtype)``, bit for bit. A concrete float JAX array outside a trace is cast
+    on the host, as XLA's CPU convert does it (round to nearest even, subnormal inputs and results
+    flushed to signed zero): ``jnp.asarray`` would compile a convert per leaf shape."""
+    dt = np.dtype(dtype)
+    if (
+        not isinstance(x, jax.Array)
+        or is_traced(x)
+        or inside_trace()
+        or x.dtype == dt
+        or np.dtype(x.dtype).kind != "f"
+        or dt.kind != "f"
+    ):
+        return jnp.asarray(x, dtype=dt)
+    with np.errstate(over="ignore"):  # overflow to inf, as XLA
+        cast = _flush_subnormal(_flush_subnormal(np.asarray(x)).astype(dt))
+    return jax.device_put(cast)
+
+
+def _flush_subnormal(a: np.ndarray) -> np.ndarray:
+    """``a`` with subnormal values replaced by zeros of their sign (XLA's CPU flush to zero)."""
+    return np.where(np.abs(a) < np.finfo(a.dtype).tiny, np.copysign(0, a), a).astype(a.dtype)
 
 
 def _host(x: Any) -> Any:
@@ -225,7 +262,8 @@ class Robot:
         for f in _INERTIAL:  # no inertial data given: zeros of the frames' shapes
             if getattr(self, f) is None:
                 shape = _leaf_shape(self, f)
-                object.__setattr__(self, f, jnp.zeros(shape, dtype=jnp.asarray(self.base).dtype))
+                zeros = np.zeros(shape, dtype=jnp.asarray(self.base).dtype)
+                object.__setattr__(self, f, _from_host(zeros))  # not jnp.zeros: no compile
 
     # ------------------------------------------------------------------ pytree
     def tree_flatten(self):
@@ -525,7 +563,7 @@ class Robot:
     def astype(self, dtype: Any) -> Robot:
         """A copy with every float leaf cast to ``dtype`` (float32 or float64)."""
         dt = resolve_dtype(dtype)
-        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dt), self)
+        return jax.tree_util.tree_map(lambda x: _cast(x, dt), self)
 
     def with_configurations(self, **named: Sequence[float]) -> Robot:
         """A copy with extra named configurations, each of length ``nq``."""
