@@ -166,8 +166,9 @@ class MapStats:
     """Timings of one :func:`chunked_map` call.
 
     ``compile_seconds``: tracing, lowering and compiling ``jax.jit(jax.vmap(fn))`` for the chunk
-    shape (once). ``run_seconds``: feeding every chunk, running it and copying its results to the
-    host outputs, compile excluded. ``padding``: rows added to fill the last chunk (computed and
+    shape (once; about 0 when a previous call with the same ``fn`` built it). ``run_seconds``:
+    feeding every chunk, running it and copying its results to the host outputs, compile
+    excluded. ``padding``: rows added to fill the last chunk (computed and
     dropped).
     """
 
@@ -199,7 +200,9 @@ def chunked_map(
     ``arrays[i].shape[1:]``) for each input and returns a pytree of arrays.
     The batch is cut into ``k = ceil(N / chunk_size)`` chunks of equal size
     ``c = ceil(N / k) <= chunk_size`` rows, and ``jax.jit(jax.vmap(fn))`` is traced and compiled
-    once for that shape. The last chunk is padded to ``c`` rows (fewer than ``k`` padding rows) by
+    once for that shape (and kept: a later call with the same ``fn`` object, chunk shape and
+    dtypes reuses the program, as ``jax.jit`` does; a new function, e.g. a new ``lambda``, is
+    compiled afresh). The last chunk is padded to ``c`` rows (fewer than ``k`` padding rows) by
     repeating the last row, so ``fn`` only sees valid inputs; the padding is dropped from the
     results.
 
@@ -638,10 +641,43 @@ def _trace(
 ) -> jax.stages.Traced:
     """Trace ``jit(vmap(fn))`` for ``chunk`` rows (``.out_info``: output shapes; ``.lower()
     .compile()``: the executable, which accepts exactly these shapes, so it never retraces).
-    Inputs and outputs are split along rows over ``mesh``."""
+    Inputs and outputs are split along rows over ``mesh``.
+
+    The ``jax.jit`` object is kept per ``(fn, mesh)`` (:func:`_mapped`), so that a later call
+    with the same function, shapes and dtypes reuses JAX's caches of the trace, the lowering
+    and the executable (as ``jax.jit(fn)`` called twice does), instead of tracing and compiling
+    again."""
     sharding = NamedSharding(mesh, PartitionSpec("rows"))
     specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype, sharding=sharding) for a in host]
-    return jax.jit(jax.vmap(fn), out_shardings=sharding).trace(*specs)
+    return _mapped(fn, mesh).trace(*specs)
+
+
+MAPPED_CACHE_SIZE = 8
+"""How many ``jax.jit(jax.vmap(fn))`` objects :func:`_mapped` keeps (least recently used dropped
+first); each holds its function (and what that closes over) and JAX's compiled executables for
+the shapes it was called with."""
+
+_mapped_cache: collections.OrderedDict = collections.OrderedDict()
+
+
+def _mapped(fn: Callable[..., Any], mesh: Mesh) -> Any:
+    """``jax.jit(jax.vmap(fn))`` with outputs split along rows over ``mesh``: one object per
+    ``(fn, mesh)`` (at most :data:`MAPPED_CACHE_SIZE`), a new one for an unhashable ``fn``.
+    Keyed by the function object itself, as ``jax.jit``'s own cache is: a function whose
+    behaviour depends on state it reads when traced (not on its arguments) is not retraced when
+    that state changes, exactly as under ``jax.jit``."""
+    sharding = NamedSharding(mesh, PartitionSpec("rows"))
+    try:
+        key = (fn, mesh)
+        jitted = _mapped_cache.pop(key, None)
+    except TypeError:  # unhashable: no cache
+        return jax.jit(jax.vmap(fn), out_shardings=sharding)
+    if jitted is None:
+        jitted = jax.jit(jax.vmap(fn), out_shardings=sharding)
+    _mapped_cache[key] = jitted  # most recently used last
+    while len(_mapped_cache) > MAPPED_CACHE_SIZE:
+        _mapped_cache.popitem(last=False)
+    return jitted
 
 
 def _feed(host: list[Any], start: int, chunk: int, n: int, mesh: Mesh) -> list[jax.Array]:

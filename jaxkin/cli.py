@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import math
 import os
@@ -820,7 +821,7 @@ def _output_choice(args: argparse.Namespace, label: str, n: int) -> tuple[str | 
 
 def _open_writer(args, robot: jk.Robot, frame: str, path: str, fmt: str, n: int) -> ResultWriter:
     """The output, opened before any work so that a bad path fails first."""
-    kernel = velocity_results(robot, frame, args.reference, args.representation)
+    kernel = _results_kernel(velocity_results, robot, frame, args.reference, args.representation)
     row = jax.ShapeDtypeStruct((robot.dof,), np.dtype(args.dtype))
     shapes = jax.eval_shape(kernel, row, row)
     fields = {k: (s.shape, s.dtype) for k, s in shapes.items()}
@@ -855,7 +856,9 @@ def _run(args, robot: jk.Robot, frame: str, q, qd, summary: _Summary) -> list[Ma
     """The autodiff check on the first ``CHECK_ROWS`` configurations (their results written
     too), then the one-pass kernel on the rest; every chunk goes through ``summary``."""
     n, k = len(q), min(len(q), CHECK_ROWS)
-    check = velocity_results(robot, frame, args.reference, args.representation, check=True)
+    check = _results_kernel(
+        velocity_results, robot, frame, args.reference, args.representation, check=True
+    )
     _, first = chunked_map(
         check, q[:k], qd[:k], chunk_size=args.chunk_size, out=summary, return_stats=True
     )
@@ -869,12 +872,26 @@ def _run(args, robot: jk.Robot, frame: str, q, qd, summary: _Summary) -> list[Ma
         return [first]
     show = n >= PROGRESS_MIN_N if args.progress is None else args.progress
     bar = ProgressBar(n - k, "velocities", unit="cfg", enabled=show, force=args.progress is True)
-    fn = velocity_results(robot, frame, args.reference, args.representation)
+    fn = _results_kernel(velocity_results, robot, frame, args.reference, args.representation)
     rest = [a[k:] if isinstance(a, np.ndarray) else a.tail(k) for a in (q, qd)]
     _, stats = chunked_map(
         fn, *rest, chunk_size=args.chunk_size, progress=bar, out=summary, return_stats=True
     )
     return [first, stats]
+
+
+@functools.lru_cache(maxsize=8)
+def _results_kernel(make, robot: jk.Robot, frame: str, reference: str, representation: str,
+                    check: bool = False):  # fmt: skip
+    """``make(robot, frame, reference, representation)`` (``check=True`` passed on when set):
+    the same function object for an equal robot and equal options, so that a later run in the
+    same process (tests, a notebook calling :func:`main`) reuses its trace and compiled chunk
+    kernel (:func:`jaxkin.batch.chunked_map` keeps them per function) instead of building them
+    again. ``make`` is :func:`jaxkin.velocity.velocity_results`, passed in so that a replaced one
+    is looked up when called."""
+    if check:
+        return make(robot, frame, reference, representation, check=True)
+    return make(robot, frame, reference, representation)
 
 
 def _failures(args: argparse.Namespace, summary: _Summary) -> list[str]:

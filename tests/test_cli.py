@@ -171,6 +171,30 @@ def test_default_output_name_and_no_output(capsys, in_tmp):
     assert load(in_tmp / "velocities_two_link_planar_40.npz")["sigma"].shape == (40, 2)
 
 
+def test_a_repeated_run_reuses_its_kernel(capsys, monkeypatch):
+    """The results kernel is made once per robot, options and process, and chunked_map keeps its
+    program: a second identical run (tests, a notebook calling cli.main) traces nothing."""
+    made, traces = [], []
+    real = cli.velocity_results
+
+    def counted(*args, **kwargs):
+        made.append(kwargs.get("check", False))
+        fn = real(*args, **kwargs)
+
+        def results(q, qd):
+            traces.append(1)
+            return fn(q, qd)
+
+        return results
+
+    monkeypatch.setattr(cli, "velocity_results", counted)
+    argv = ("velocities", "two_link_planar", "--n", "40", "--no-output")
+    assert run(capsys, *argv)[0] == 0
+    assert made == [True] and len(traces) == 1  # 40 rows: all checked, one kernel
+    assert run(capsys, *argv)[0] == 0
+    assert made == [True] and len(traces) == 1
+
+
 def test_float64_turns_x64_on_for_the_run_only(capsys):
     jax.config.update("jax_enable_x64", False)  # conftest turns it back on after the test
     code, out, _ = run(capsys, "velocities", "two_link_planar", "--n", "40", "--no-output")

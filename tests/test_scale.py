@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 import jaxkin.testing as jkt
@@ -29,6 +30,13 @@ def compiled(f, **kwargs):
     """``jax.jit(f)`` with the compiler options of jaxkin's own executables (XLA's CPU fusion
     emitters off: these kernels compile two to three times faster, same tracing and caching)."""
     return jax.jit(f, compiler_options=_jit.compiler_options() or None, **kwargs)
+
+
+def fast(f):
+    """``jax.jit(f)`` with the suite's options for one-off test programs (``_xla.FAST_COMPILE``:
+    the same numbers to rounding, a cheaper compile), where no bit-for-bit comparison with
+    jaxkin's own executables is made."""
+    return jax.jit(f, compiler_options=FAST_COMPILE)
 
 
 def _chain(n, seed=0, convention="standard", prismatic=True):
@@ -88,6 +96,10 @@ def test_chunked_map_compiles_once_for_any_number_of_chunks():
     assert len(traces) == 1
     expected = compiled(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(qs)
     np.testing.assert_array_equal(out, np.asarray(expected))
+    # the same function again (chunk shape and dtype too): its program is kept, nothing retraced
+    again, stats = batch.chunked_map(fn, qs, chunk_size=128, return_stats=True)
+    assert len(traces) == 1 and stats.n_chunks == 8
+    np.testing.assert_array_equal(again, out)
 
 
 # --- long chains -------------------------------------------------------------------------------
@@ -108,7 +120,7 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", joints)
         monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", unfolded)
         assert kinematics.uses_scan(robot) == (joints == defaults[0])
-        every = compiled(
+        every = fast(
             lambda q, qd: [
                 jk.fk_all(robot, q),
                 jk.fk(robot, q, frame="link7"),
@@ -151,10 +163,10 @@ def test_long_chain_program_size_does_not_grow_with_length():
 def test_three_thousand_joint_chain_runs():
     robot = _chain(3000, seed=7, prismatic=False)
     q = jnp.asarray(np.random.default_rng(8).uniform(-0.1, 0.1, 3000))
-    J = compiled(lambda q: jk.geometric_jacobian(robot, q))(q)
+    J = fast(lambda q: jk.geometric_jacobian(robot, q))(q)
     assert J.shape == (6, 3000) and bool(jnp.all(jnp.isfinite(J)))
     # the tip's angular column sums are the tip's angular velocity for qd = 1: compare with jvp
-    T, Tdot = compiled(lambda q: jax.jvp(lambda q: jk.fk(robot, q), (q,), (jnp.ones(3000),)))(q)
+    T, Tdot = fast(lambda q: jax.jvp(lambda q: jk.fk(robot, q), (q,), (jnp.ones(3000),)))(q)
     w = jk.spatial.vee(Tdot[:3, :3] @ T[:3, :3].T)
     np.testing.assert_allclose(
         np.asarray(J.sum(axis=1)), np.concatenate([Tdot[:3, 3], w]), rtol=0, atol=1e-9
@@ -174,12 +186,13 @@ def test_path_outputs_equal_in_memory_results(tmp_path):
     robot = jk.robots.load(SMALL)
     rng = np.random.default_rng(5)
     qs, qds = rng.uniform(-3, 3, (777, 4)), rng.uniform(-1, 1, (777, 4))
-    mem = batch.chunked_map(_kernel(robot), qs, qds, chunk_size=100)
-    npz = batch.chunked_map(_kernel(robot), qs, qds, chunk_size=100, out=tmp_path / "r.npz")
+    fn = _kernel(robot)  # one function: the second call reuses the first one's program
+    mem = batch.chunked_map(fn, qs, qds, chunk_size=100)
+    npz = batch.chunked_map(fn, qs, qds, chunk_size=100, out=tmp_path / "r.npz")
     with np.load(npz) as z:
         for k in ("J", "twist"):
             np.testing.assert_array_equal(z[k], mem[k])
-    d = batch.chunked_map(_kernel(robot), qs, qds, chunk_size=64, out=tmp_path / "r_dir")
+    d = batch.chunked_map(fn, qs, qds, chunk_size=64, out=tmp_path / "r_dir")
     np.testing.assert_array_equal(np.load(os.path.join(d, "J.npy"), mmap_mode="r"), mem["J"])
     assert sorted(os.listdir(tmp_path)) == ["r.npz", "r_dir"]  # no temporaries left
 
@@ -240,7 +253,7 @@ SHARDED = textwrap.dedent(
     import jax, numpy as np
     jax.config.update("jax_enable_x64", True)
     import jaxkin as jk
-    from jaxkin import batch
+    from jaxkin import _jit, batch
     assert len(jax.devices()) == 4, jax.devices()
     robot = jk.robots.load("scara")  # small: what is tested is the sharding
     rng = np.random.default_rng(0)
@@ -250,13 +263,16 @@ SHARDED = textwrap.dedent(
         return J, J @ qd
     one = batch.chunked_map(fn, qs, qds, chunk_size=250, devices=jax.devices()[:1])
     four = batch.chunked_map(fn, qs, qds, chunk_size=250)  # default: all 4 devices
-    ref = jax.jit(jax.vmap(fn))(qs, qds)
+    options = _jit.compiler_options() or None  # as jaxkin compiles: a cheaper compile
+    ref = jax.jit(jax.vmap(fn), compiler_options=options)(qs, qds)
     for a, b, c in zip(one, four, ref):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(a, np.asarray(c), rtol=0, atol=1e-15)
-    # the compiled chunk really is split over the 4 devices
-    traced = batch._trace(fn, [qs, qds], 252, batch._mesh(None))
-    shard = traced.lower().compile().input_shardings[0][0]
+    # the compiled chunk really is split over the 4 devices (chunked_map's own program above,
+    # kept per function: traced, lowered and compiled again from JAX's caches)
+    chunk = batch._chunking(250, len(qs), 4)[0]  # four's chunk: 204 rows, a multiple of 4
+    traced = batch._trace(fn, [qs, qds], chunk, batch._mesh(None))
+    shard = traced.lower().compile(options).input_shardings[0][0]
     assert len(shard.device_set) == 4, shard
     print("sharded ok")
     """
