@@ -20,6 +20,7 @@ SCRIPT = textwrap.dedent(
     import logging, sys
     import jax, jax.numpy as jnp
     import jaxkin as jk
+    print(jax.config.jax_compilation_cache_dir)  # importing jaxkin switched nothing on
     jax.config.update("jax_enable_x64", True)
     hits = []
     class Hits(logging.Handler):
@@ -30,36 +31,29 @@ SCRIPT = textwrap.dedent(
     logger.setLevel(logging.DEBUG)
     logger.addHandler(Hits())
     jk.compilation.enable_persistent_cache(sys.argv[1], min_compile_time_s=0.0)
-    robot = jk.robots.load("puma560")
-    J = jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(jnp.zeros((3, 6)))
+    robot = jk.robots.load("scara")  # small: what is tested is the cache
+    J = jax.jit(jax.vmap(lambda q: jk.geometric_jacobian(robot, q)))(jnp.zeros((3, 4)))
     print(len(hits), float(J[0, 2, 0]))
     """
 )
 
 
-def test_not_switched_on_by_importing_jaxkin():
-    # a fresh process: this suite's conftest shares one cache between its own processes
+@pytest.fixture(scope="module")
+def two_runs(tmp_path_factory):
+    """SCRIPT run twice in fresh processes sharing one cache directory: ``(directory, [stdout
+    lines of each])``. The suite's own cache settings are left out of their environment (this
+    conftest shares one cache between the suite's processes), so the first line of each is what
+    importing jax and jaxkin set."""
+    where = tmp_path_factory.mktemp("xla_cache")
     env = {
         k: v
         for k, v in os.environ.items()
         if not k.startswith(("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE"))
     }
-    run = subprocess.run(
-        [sys.executable, "-c", "import jax, jaxkin; print(jax.config.jax_compilation_cache_dir)"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=env,
-    )
-    assert run.returncode == 0, run.stderr
-    assert run.stdout.split() == ["None"]
-
-
-def test_a_second_process_loads_what_the_first_compiled(tmp_path):
-    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    env["JAX_PLATFORMS"] = "cpu"
     runs = [
         subprocess.run(
-            [sys.executable, "-c", SCRIPT, str(tmp_path)],
+            [sys.executable, "-c", SCRIPT, str(where)],
             capture_output=True,
             text=True,
             timeout=300,
@@ -69,10 +63,21 @@ def test_a_second_process_loads_what_the_first_compiled(tmp_path):
     ]
     for run in runs:
         assert run.returncode == 0, run.stderr
-    (hits1, value1), (hits2, value2) = (run.stdout.split() for run in runs)
+    return where, [run.stdout.splitlines() for run in runs]
+
+
+def test_not_switched_on_by_importing_jaxkin(two_runs):
+    _, outputs = two_runs
+    for lines in outputs:
+        assert lines[0].split() == ["None"]
+
+
+def test_a_second_process_loads_what_the_first_compiled(two_runs):
+    where, outputs = two_runs
+    (hits1, value1), (hits2, value2) = (lines[1].split() for lines in outputs)
     assert int(hits1) == 0 and int(hits2) >= 1
     assert value1 == value2
-    assert any(tmp_path.iterdir())
+    assert any(where.iterdir())
 
 
 def test_default_directory_follows_the_environment(monkeypatch, tmp_path):

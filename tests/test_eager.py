@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _xla import FAST_COMPILE
 from hypothesis import given, settings
 
 import jaxkin as jk
@@ -68,10 +69,11 @@ def arm():
 
 
 def compiled(f):
-    """``jax.jit(f)`` with the compiler options of jaxkin's own executables (XLA's CPU fusion
-    emitters off: these kernels compile about twice as fast). What is tested, the kernel traced
-    inline and the cache left alone, does not depend on them."""
-    return jax.jit(f, compiler_options=_jit.compiler_options() or None)
+    """``jax.jit(f)`` with the suite's options for one-off test programs (``_xla.FAST_COMPILE``:
+    no fast-math, the same numbers; these kernels compile several times faster than with XLA's
+    defaults). What is tested, the kernel traced inline and the cache left alone, does not
+    depend on them."""
+    return jax.jit(f, compiler_options=FAST_COMPILE)
 
 
 def _leaves(x):
@@ -87,9 +89,13 @@ def test_eager_equals_traced_and_compiles_once(arm, name):
     for k in range(3):  # new values, same shapes: no new compile
         again = call(robot, q + 0.1 * (k + 1), qd)
     assert _jit.eager_cache_info()["executables"] == 1
+
     # inline in the user's jit, vmap and grad: the same numbers, and the cache is not touched
-    traced = compiled(lambda q, qd: call(robot, q, qd))(q, qd)
-    mapped = compiled(jax.vmap(lambda q, qd: call(robot, q, qd)))(q[None], qd[None])
+    # (the jit and the vmap inside it in one program: one compile)
+    def inline(q, qd):
+        return call(robot, q, qd), jax.vmap(lambda q, qd: call(robot, q, qd))(q[None], qd[None])
+
+    traced, mapped = compiled(inline)(q, qd)
     for a, b, c in zip(_leaves(first), _leaves(traced), _leaves(mapped), strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15 * max(1.0, np.abs(b).max()))
         np.testing.assert_allclose(a, c[0], rtol=0, atol=1e-15 * max(1.0, np.abs(c).max()))
@@ -132,8 +138,13 @@ def test_grad_of_the_robot_and_of_q_trace_inline(arm):
     robot, q, qd = arm
     jk.twist(robot, q, qd)
     before = _jit.eager_cache_info()
-    g = compiled(jax.grad(lambda q: jk.twist(robot, q, qd)[0]))(q)
-    gr = compiled(jax.grad(lambda r: jk.fk(r, q)[0, 3]))(robot)  # with respect to the robot
+    # with respect to q, and to the robot (traced), in one program
+    g, gr = compiled(
+        lambda q, r: (
+            jax.grad(lambda q: jk.twist(robot, q, qd)[0])(q),
+            jax.grad(lambda r: jk.fk(r, q)[0, 3])(r),
+        )
+    )(q, robot)
     assert _jit.eager_cache_info() == before
     eps = 1e-6
     for k in range(4):

@@ -1,5 +1,6 @@
 """The Robot pytree under JAX transformations, precision, and errors for bad input."""
 
+import logging
 import math
 import warnings
 
@@ -64,7 +65,10 @@ def test_vmap_over_a_stack_of_robots(robot):
         for _ in range(5)
     ]
     stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *robots)
-    Js = jax.vmap(lambda r: jk.geometric_jacobian(r, Q))(stacked)
+    # one compiled program for the stack (at top level, vmap runs the kernel op by op)
+    Js = jax.jit(jax.vmap(lambda r: jk.geometric_jacobian(r, Q)), compiler_options=FAST_COMPILE)(
+        stacked
+    )
     with jax.disable_jit():  # each robot used once: op by op, not one compiled kernel per robot
         expected = [np.asarray(jk.geometric_jacobian(r, Q)) for r in robots]
     for i in range(len(robots)):
@@ -105,9 +109,14 @@ def test_grad_with_respect_to_placement_parameters():
     def f(r):
         return jnp.sum(jk.fk(r, q)[:3, 3] ** 2)
 
-    g = jax.grad(f)(robot)
+    # robot traced: one compiled program for the gradient and every perturbed robot's value
+    value_and_grad = jax.jit(jax.value_and_grad(f), compiler_options=FAST_COMPILE)
+    g = value_and_grad(robot)[1]
     h = 1e-6
-    f_of = jax.jit(f, compiler_options=FAST_COMPILE)  # robot traced: one compile for all
+
+    def f_of(r):
+        return value_and_grad(r)[0]
+
     for key in ("xyz", "rpy"):
         for j in range(robot.n_joints):
             for k in range(3):
@@ -152,31 +161,81 @@ def test_float32_within_float32_tolerance(robot_q):
     robot32, q = robot_q
     q32 = jnp.asarray(q, dtype=jnp.float32)
     robot64 = robot32.astype(np.float64)
-    J32 = jk.geometric_jacobian(robot32, q32)
+    J32 = jk.geometric_jacobian(robot32, q32)  # op by op: the float32 result under test
     assert J32.dtype == jnp.float32
-    J64 = np.asarray(jk.geometric_jacobian(robot64, jnp.asarray(q32, dtype=jnp.float64)))
-    Ts = np.asarray(jk.fk_all(robot64, np.asarray(q32, dtype=np.float64)))
+    # The float64 references and the autodiff Jacobian in one compiled program for this robot:
+    # op by op, the float64 kernels compile every primitive again in float64, and jacfwd's vmap
+    # over the dof compiles every primitive again for each new dof (about 20 per dof), several
+    # times the cost of one kernel.
+    with jax.disable_jit(False):
+        references = jax.jit(
+            lambda q32, q64: (
+                jk.geometric_jacobian(robot64, q64),
+                jk.fk_all(robot64, q64),
+                jk.jacobian_fwd(robot32, q32),
+            ),
+            compiler_options=FAST_COMPILE,
+        )
+        J64, Ts, Jf = (np.asarray(x) for x in references(q32, np.asarray(q32, dtype=np.float64)))
     reach = max(1.0, float(np.max(np.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
     eps32 = np.finfo(np.float32).eps
     tol = 4 * eps32 * (1 + float(np.max(np.abs(q)))) * reach * robot32.dof * 4
     np.testing.assert_allclose(np.asarray(J32), J64, rtol=0, atol=tol)
-    # hand-built vs autodiff within float32 (tests/README.md: 1e-6 scaled by reach). jacfwd is
-    # compiled (one kernel for this robot): op by op, its vmap over the dof compiles every
-    # primitive again for each new dof (about 20 per dof), several times the cost of one kernel.
-    with jax.disable_jit(False):
-        jacobian_fwd = jax.jit(lambda q: jk.jacobian_fwd(robot32, q), compiler_options=FAST_COMPILE)
-        Jf = np.asarray(jacobian_fwd(q32))
+    # hand-built vs autodiff within float32 (tests/README.md: 1e-6 scaled by reach)
     np.testing.assert_allclose(np.asarray(J32), Jf, rtol=0, atol=1e-6 * reach * robot32.dof)
 
 
 def test_float32_robot_and_float32_q_stay_float32():
-    r = jk.robots.load(
-        "puma560" if "puma560" in jk.robots.names() else "niryo_one", dtype=np.float32
-    )
+    # the four-joint arm of this file: the dtype is the point, not the robot (a Puma's kernels
+    # compile about twice as slowly)
+    r = jk.Robot.from_dh(ROWS, dtype=np.float32)
     q = jnp.zeros(r.dof, dtype=jnp.float32)
     assert jk.fk(r, q).dtype == jnp.float32
     assert jk.geometric_jacobian(r, q).dtype == jnp.float32
     assert jk.analytical_jacobian(r, q, return_margin=True)[0].dtype == jnp.float32
+
+
+class _Compiles(logging.Handler):
+    """The programs JAX compiles while in use (``with _Compiles() as c: ...; c.names``)."""
+
+    def __init__(self):
+        super().__init__()
+        self.names = []
+
+    def emit(self, record):
+        if record.getMessage().startswith("Compiling "):
+            self.names.append(record.getMessage().split()[1])
+
+    def __enter__(self):
+        self._log = jax.log_compiles(True)
+        self._log.__enter__()
+        logging.getLogger("jax").addHandler(self)
+        return self
+
+    def __exit__(self, *exc):
+        logging.getLogger("jax").removeHandler(self)
+        self._log.__exit__(*exc)
+
+
+def test_building_and_casting_a_robot_compiles_nothing():
+    """A robot's numpy leaves reach JAX by device_put, and astype casts concrete leaves on the
+    host: no program per leaf shape (jnp.array of numpy and jnp.asarray(x, dtype) compile one
+    each, for every new robot size), and the same bits as XLA's convert (round to nearest,
+    subnormals flushed to zero, overflow to inf)."""
+    rows = [dict(ROWS[i % 4]) for i in range(7)]  # a size no other test builds
+    rows[0]["a"] = 1e-39  # subnormal in float32
+    rows[1]["d"] = 1e39  # beyond float32
+    with _Compiles() as compiles:
+        robot = jk.Robot.from_dh(rows, dtype=np.float64)
+        robot32 = robot.astype(np.float32)
+        again = robot32.astype(np.float64)
+    assert compiles.names == []
+    assert robot32.dtype == np.float32 and again.dtype == np.float64
+    for name in ("a", "d"):  # XLA's casts, compiled: the same bits
+        for src, dst in ((robot, robot32), (robot32, again)):
+            xla = jnp.asarray(src.params[name], dst.dtype)
+            np.testing.assert_array_equal(np.asarray(dst.params[name]), np.asarray(xla))
+    assert float(robot32.params["a"][0]) == 0.0 and np.isinf(robot32.params["d"][1])
 
 
 def test_float64_request_with_x64_off_warns_loudly():
