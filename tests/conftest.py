@@ -1,4 +1,5 @@
-"""Strict JAX for the whole suite: float64, rank promotion raises, warnings are errors.
+"""Strict JAX for the whole suite: float64, rank promotion raises, warnings are errors; quick
+compiles.
 
 The float32 tests build float32 robots and inputs explicitly (x64 stays on globally here, which is
 what a float64 user has; jaxkin itself never flips the flag).
@@ -8,9 +9,38 @@ import os
 import shutil
 import tempfile
 
-import jax
-import pytest
-from hypothesis import HealthCheck, Phase, settings
+QUICK_COMPILE_FLAGS = (
+    "--xla_backend_optimization_level=0",
+    "--xla_llvm_disable_expensive_passes=true",
+    "--xla_cpu_parallel_codegen_split_count=1",
+)
+"""XLA flags of every process of the run (see :func:`_quick_compiles`)."""
+
+
+def _quick_compiles() -> None:
+    """LLVM's optimisation off for every compile of the run (set before JAX starts its backend).
+
+    The suite's time is mostly compiling, and most programs it compiles run once on a few
+    configurations: XLA still optimises the HLO as for users (same fusions, same operations, no
+    fast-math) but LLVM generates its code at ``-O0``, several times faster to compile and about
+    half as fast to run. Results may differ in the last bit where ``-O3`` contracts a multiply
+    and an add into an FMA; tests/test_compile_options.py checks that the options a user's
+    process compiles with give the numbers the suite checks. Subprocesses (the CLI, README,
+    doctests, notebooks) inherit ``XLA_FLAGS``. ``JAXKIN_TESTS_XLA_DEFAULTS=1`` runs the suite
+    with XLA's own defaults.
+    """
+    if os.environ.get("JAXKIN_TESTS_XLA_DEFAULTS"):
+        return
+    flags = os.environ.get("XLA_FLAGS", "").split()
+    missing = [flag for flag in QUICK_COMPILE_FLAGS if flag not in flags]
+    os.environ["XLA_FLAGS"] = " ".join(flags + missing)
+
+
+_quick_compiles()
+
+import jax  # noqa: E402  (after XLA_FLAGS)
+import pytest  # noqa: E402
+from hypothesis import HealthCheck, Phase, settings  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")

@@ -8,8 +8,8 @@ tests cover. The totals are pinned from below so that examples cannot disappear 
 them when you add some.
 
 The examples of every module run in one fresh interpreter (a module fixture; each module's test
-reads its report), which compiles with XLA's faster options (``_xla.FAST_COMPILE`` as
-``XLA_FLAGS``: no fast-math; the examples' time is mostly compiling, and they halve it). It is
+reads its report), which inherits the suite's ``XLA_FLAGS`` (LLVM's optimisation off,
+tests/conftest.py: the examples' time is mostly compiling). It is
 configured as the suite is: float64, and warnings raised as errors (but the persistent
 compilation cache's, as in tests/conftest.py, and SyntaxWarning, as in pyproject.toml).
 """
@@ -19,14 +19,12 @@ from __future__ import annotations
 import doctest
 import importlib
 import json
-import os
 import pkgutil
 import subprocess
 import sys
 import textwrap
 
 import pytest
-from _xla import FAST_COMPILE
 
 import jaxkin
 
@@ -107,14 +105,11 @@ def reports(request) -> dict[str, list]:
         for item in request.session.items
         if getattr(item, "originalname", None) == "test_docstring_examples_run"
     ]
-    flags = [os.environ.get("XLA_FLAGS", "")]
-    flags += [f"--{name}={str(value).lower()}" for name, value in FAST_COMPILE.items()]
     proc = subprocess.run(
         [sys.executable, "-c", _RUNNER],
         input=json.dumps([names or WITH_EXAMPLES, OPTIONFLAGS, IGNORED_WARNINGS]),
         capture_output=True,
         text=True,
-        env={**os.environ, "XLA_FLAGS": " ".join(flags).strip()},
         timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-6000:]

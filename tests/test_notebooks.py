@@ -7,18 +7,16 @@ with the committed file's, and every cell that outputs something must have outpu
 The notebooks run one after the other in one kernel (``build.kernel``; ``build.RESET_CELL`` clears
 what the previous one left: names, figures, print options, JAX's float64 switch), which saves
 each one a kernel's start and the imports of jax, matplotlib, sympy and jaxkin; ``python
-notebooks/build.py`` still runs each in a fresh kernel. The kernel compiles with XLA's faster
-options (``_xla.FAST_COMPILE`` as ``XLA_FLAGS``: no fast-math; about a third less CPU time for
-the compile-bound notebooks); the committed outputs come from the default ones.
+notebooks/build.py`` still runs each in a fresh kernel. The kernel inherits the suite's
+``XLA_FLAGS`` (LLVM's optimisation off, tests/conftest.py); the committed outputs come from XLA's
+defaults.
 """
 
 import importlib.util
-import os
 import pathlib
 
 import nbformat
 import pytest
-from _xla import FAST_COMPILE
 
 pytest.importorskip("jupytext")
 pytest.importorskip("nbclient")
@@ -92,9 +90,7 @@ def test_install_cell_installs_from_the_checkout_or_a_wheel_never_by_name(monkey
 @pytest.fixture(scope="module")
 def kernel():
     """One kernel for the notebooks of this file (see the module's docstring)."""
-    flags = [os.environ.get("XLA_FLAGS", "")]
-    flags += [f"--{name}={str(value).lower()}" for name, value in FAST_COMPILE.items()]
-    with build.kernel({"XLA_FLAGS": " ".join(flags).strip()}) as shared:
+    with build.kernel() as shared:
         yield shared
 
 

@@ -3,15 +3,14 @@
 They run in a fresh interpreter with JAX's defaults (float32, as a reader who pastes them has;
 no test-suite configuration), from a temporary working directory. A block that is not meant to
 run starts with a line ``# not run: <reason>``; the number of such blocks is pinned below, so
-that a block cannot silently stop being checked. The interpreter compiles with XLA's faster
-options (``_xla.FAST_COMPILE`` as ``XLA_FLAGS``: no fast-math; compiling is most of this test's
-time, and they halve it).
+that a block cannot silently stop being checked. The interpreter inherits the suite's
+``XLA_FLAGS`` (LLVM's optimisation off, tests/conftest.py: compiling is most of this test's
+time).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 import re
 import subprocess
@@ -19,7 +18,6 @@ import sys
 import textwrap
 
 import pytest
-from _xla import FAST_COMPILE
 
 README = pathlib.Path(__file__).parent.parent / "README.md"
 SKIP_MARK = "# not run:"
@@ -86,15 +84,12 @@ def test_readme_python_blocks_run(tmp_path):
         for line, code in python_blocks(README.read_text())
         if not code.lstrip().startswith(SKIP_MARK)
     ]
-    flags = [os.environ.get("XLA_FLAGS", "")]
-    flags += [f"--{name}={str(value).lower()}" for name, value in FAST_COMPILE.items()]
     proc = subprocess.run(
         [sys.executable, "-c", _RUNNER],
         input=json.dumps(blocks),
         capture_output=True,
         text=True,
         cwd=tmp_path,
-        env={**os.environ, "XLA_FLAGS": " ".join(flags).strip()},
         timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-6000:]
