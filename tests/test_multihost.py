@@ -6,6 +6,10 @@ CPU devices, JAX's default CPU collectives: gloo over TCP) and evaluate the same
 returns the whole result on its host. The test process computes the same map on its own
 devices alone and requires every child's result to be bitwise identical to it, and to a
 plain ``jit(vmap)`` of the kernel as an independent check of the map itself.
+
+Every process here compiles with XLA's defaults (the suite's ``XLA_FLAGS`` removed: at LLVM's
+``-O0`` the last bit can depend on the batch shape, and bitwise equality across chunkings is a
+property of the programs users compile), so the reference runs in a third process.
 """
 
 import json
@@ -15,12 +19,10 @@ import subprocess
 import sys
 import textwrap
 
-import jax
 import numpy as np
 import pytest
 
 import jaxkin as jk
-from jaxkin.batch import chunked_map
 
 N_ROWS = 37  # not a multiple of the chunk (8 rows) nor of the 4 devices: the last chunk is padded
 CHUNK = 8
@@ -59,6 +61,28 @@ CHILD = textwrap.dedent(
 )
 
 
+# The reference: the same map on one process's devices, and a plain jit(vmap) of the kernel.
+REFERENCE = textwrap.dedent(
+    """
+    import sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+    import jaxkin as jk
+    from jaxkin import _jit
+    from jaxkin.batch import chunked_map
+    from tests.test_multihost import CHUNK, ROBOT, inputs, kernel
+
+    robot = jk.robots.load(ROBOT)
+    q = inputs(robot)
+    J, T = chunked_map(kernel(robot), q, chunk_size=CHUNK)
+    options = _jit.compiler_options() or None  # chunked_map's: the same program, the same bits
+    J_direct, T_direct = jax.jit(jax.vmap(kernel(robot)), compiler_options=options)(q)
+    np.savez(sys.argv[1], J=J, T=T, J_direct=J_direct, T_direct=T_direct)
+    """
+)
+
+
 def kernel(robot):
     def f(q):
         return jk.geometric_jacobian(robot, q), jk.fk(robot, q)
@@ -80,25 +104,28 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _spawn(*args: str) -> subprocess.Popen:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("XLA_FLAGS", None)  # XLA's defaults (see above); the child sets its device count
+    env["JAX_PLATFORMS"] = "cpu"
+    return subprocess.Popen(
+        [sys.executable, "-c", *args],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
 def _start_children(tmp_path):
     address = f"127.0.0.1:{_free_port()}"
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("XLA_FLAGS", None)  # the child sets its own device count
-    env["JAX_PLATFORMS"] = "cpu"
     outs = [str(tmp_path / f"proc{i}.npz") for i in range(2)]
-    procs = [
-        subprocess.Popen(
-            [sys.executable, "-c", CHILD, address, str(i), outs[i]],
-            cwd=root,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        for i in range(2)
-    ]
+    procs = [_spawn(CHILD, address, str(i), outs[i]) for i in range(2)]
     return procs, outs
 
 
@@ -124,17 +151,19 @@ def _lacks_cpu_collectives(log: str) -> bool:
 
 def test_chunked_map_two_processes_equals_single_process(tmp_path):
     procs, outs = _start_children(tmp_path)
+    ref_out = str(tmp_path / "reference.npz")
     try:  # the single-process reference, computed while the children run
-        robot = jk.robots.load(ROBOT)
-        q = inputs(robot)
-        J_ref, T_ref = chunked_map(kernel(robot), q, chunk_size=CHUNK)
-        J_direct, T_direct = jax.jit(jax.vmap(kernel(robot)))(q)
+        reference = _spawn(REFERENCE, ref_out)
     finally:
-        logs = _wait(procs)
+        logs = _wait([*procs, reference])
+    assert reference.returncode == 0, f"reference failed:\n{logs[-1][-3000:]}"
+    robot = jk.robots.load(ROBOT)
+    ref = np.load(ref_out)
+    J_ref, T_ref, J_direct, T_direct = ref["J"], ref["T"], ref["J_direct"], ref["T_direct"]
     np.testing.assert_array_equal(J_ref, np.asarray(J_direct))
     np.testing.assert_array_equal(T_ref, np.asarray(T_direct))
 
-    for p, log in zip(procs, logs, strict=True):
+    for p, log in zip(procs, logs[:2], strict=True):
         if p.returncode != 0 and _lacks_cpu_collectives(log):
             pytest.skip(f"this jaxlib has no CPU cross-process collectives: {log[-400:]}")
         assert p.returncode == 0, f"child failed (rc {p.returncode}):\n{log[-3000:]}"
