@@ -47,7 +47,7 @@ import numpy as np
 from . import spatial
 from ._checks import check_q, refuse_multi_dof, result_dtype
 from ._forward import forward_pass, frame_pose
-from ._jit import compiler_options
+from ._jit import one_shot_compiler_options
 from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
 from .model import Robot
 from .sampling import sampling_bounds
@@ -424,27 +424,6 @@ def _fd_in(reference: str, Jv, Jw, p0, R0):
     return jnp.concatenate([Jv, Jw], axis=0)
 
 
-_ONE_SHOT_OPTIONS = {
-    "xla_backend_optimization_level": 0,
-    "xla_llvm_disable_expensive_passes": True,
-    "xla_cpu_parallel_codegen_split_count": 1,
-}
-
-
-@functools.cache
-def _one_shot_options() -> dict | None:
-    """Compiler options of a program that runs once (:func:`assert_jacobian_consistent`'s):
-    jaxkin's, plus XLA's cheapest backend passes (LLVM optimisation off), since compiling is
-    nearly all of its cost. No fast-math either way: the same IEEE operations, compiled less
-    cleverly. jaxkin's options alone if this XLA rejects these."""
-    options = {**compiler_options(), **_ONE_SHOT_OPTIONS}
-    try:
-        jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options=options)
-    except Exception:  # pragma: no cover - depends on the installed jaxlib
-        return compiler_options() or None
-    return options
-
-
 def assert_jacobian_consistent(
     robot: Robot,
     q: Any,
@@ -488,7 +467,7 @@ def assert_jacobian_consistent(
             )
         return reach, out
 
-    program = jax.jit(values, compiler_options=_one_shot_options())
+    program = jax.jit(values, compiler_options=one_shot_compiler_options() or None)
     reach, out = jax.device_get(program(q))
     reach = float(reach)
     tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
