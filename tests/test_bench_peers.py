@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from _sampling import random_q
 
 import jaxkin as jk
 from bench import jacobian_report as R
@@ -25,19 +26,10 @@ def solo12():
     return src, robot, pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
 
 
-def random_q(robot, seed=0):
-    rng = np.random.default_rng(seed)
-    q = rng.uniform(-1.0, 1.0, robot.nq)
-    qi = robot.q_index[robot.multi_dof_joints[0]]
-    quat = rng.normal(size=4)
-    q[qi + 3 : qi + 7] = quat / np.linalg.norm(quat)  # jaxkin: (w, x, y, z)
-    return q
-
-
 def test_layout_puts_the_quaternion_in_pinocchio_order_and_maps_columns():
     _, robot, model = solo12()
     layout = P.PinocchioLayout(robot, model)
-    q = random_q(robot)
+    q = random_q(robot, 1)[0]  # numpy; the free flyer's quaternion (w, x, y, z) is unit
     data = model.createData()
     pin.forwardKinematics(model, data, layout.q(q))
     w, x, y, z = q[3:7]
@@ -86,7 +78,7 @@ def test_pinocchio_frames_stored_loop_fills_the_preallocated_array(several):
     src, robot, _ = solo12()
     frames = ("FL_FOOT", "HR_FOOT") if several else ("FL_FOOT",)
     pf = P.PinocchioFrames(src, robot, P.Case("feet", frames, "local", several))
-    Q = np.stack([random_q(robot, s) for s in range(3)])
+    Q = random_q(robot, 3)
     out = np.full(pf.shape(3), np.nan)
     pf.loop(True, 3, out)(pf.prepare(Q))
     assert out.shape == ((3, 2, 6, robot.nv) if several else (3, 6, robot.nv))
