@@ -58,6 +58,10 @@ nitpick_ignore_regex = [
     (r"py:(exc|class)", r"(UserWarning|Warning|OSError|FileNotFoundError)"),
 ]
 
+# Quotes stay as written: "rpy" in prose is what a user types (and copies), not “rpy”. (Also
+# spares the build docutils' smart-quotes pass over every page, about a second.)
+smartquotes = False
+
 # Notebooks are rendered with the outputs committed in them, never executed here.
 nb_execution_mode = "off"
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]

@@ -8,6 +8,7 @@ installed. The pages' ``python`` code blocks need only jaxkin and run everywhere
 
 from __future__ import annotations
 
+import functools
 import html as html_module
 import importlib.util
 import json
@@ -16,6 +17,7 @@ import pathlib
 import re
 import subprocess
 import sys
+import textwrap
 
 import jax
 import pytest
@@ -29,20 +31,66 @@ def _missing_docs_extra() -> list[str]:
     return [name for name in DOCS_EXTRA if importlib.util.find_spec(name) is None]
 
 
+# Runs in the subprocess: first records which top-level modules importing the API pages' modules
+# loads beyond what importing the required distributions' modules loads (the docs extra's test
+# below), in a fresh interpreter, then builds the site there (``python -m sphinx ARGS``), which
+# would import all of them again in an interpreter of its own.
+_BUILD = textwrap.dedent(
+    """
+    import importlib, json, sys
+    required, modules, record, argv = json.loads(sys.stdin.read())
+    for m in required:
+        try:
+            importlib.import_module(m)
+        except Exception:
+            pass
+    before = {n.split(".")[0] for n in sys.modules}
+    for m in modules:
+        importlib.import_module(m)
+    with open(record, "w", encoding="utf-8") as f:
+        json.dump(sorted({n.split(".")[0] for n in sys.modules} - before), f)
+    from sphinx.cmd.build import main
+    sys.exit(main(argv))
+    """
+)
+
+
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> pathlib.Path:
+    """The site, built by the command of docs/README.md in a subprocess, which first records
+    what the API pages import (:func:`api_page_imports`)."""
     missing = _missing_docs_extra()
     if missing:
         pytest.skip(
             f"the docs extra is not installed (no {', '.join(missing)}): "
             "python3 -m pip install -e '.[docs]' builds the site here"
         )
-    out = tmp_path_factory.mktemp("site")
-    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
-    cmd = [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-c", "docs", ".", str(out)]
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
+    work = tmp_path_factory.mktemp("docs")
+    out, record = work / "site", work / "api_page_imports.json"
+    argv = ["-W", "--keep-going", "-q", "-c", "docs", ".", str(out)]
+    # (Python 3.10 has no tomllib to read pyproject.toml: nothing recorded, the test skips)
+    imports = [_required_modules(), _api_page_modules()] if _has_tomllib() else [[], []]
+    request = [*imports, str(record), argv]
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore", "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _BUILD],
+        input=json.dumps(request),
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert proc.returncode == 0, f"strict docs build failed:\n{proc.stdout}\n{proc.stderr}"
     return out
+
+
+@pytest.fixture(scope="module")
+def api_page_imports(site) -> list[str]:
+    """The top-level modules that importing the modules of the API pages loads, beyond what
+    importing those of jaxkin's required distributions and the docs extra's loads (recorded by
+    the build's interpreter before it builds)."""
+    return json.loads((site.parent / "api_page_imports.json").read_text(encoding="utf-8"))
 
 
 def test_strict_build_has_every_page(site):
@@ -281,41 +329,50 @@ def _required(names: list[str]) -> set[str]:
     return found
 
 
-def test_docs_extra_holds_what_the_api_pages_import():
+@functools.cache
+def _owners() -> dict[str, list[str]]:
+    """``{top-level module: [distributions]}`` of what is installed (read once: it reads every
+    installed distribution's file list)."""
+    from importlib import metadata
+
+    return metadata.packages_distributions()
+
+
+def _has_tomllib() -> bool:
+    return importlib.util.find_spec("tomllib") is not None
+
+
+def _direct_requirements() -> list[str]:
+    """The requirement strings of jaxkin's dependencies and of its docs extra."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    return project["dependencies"] + project["optional-dependencies"]["docs"]
+
+
+def _required_modules() -> list[str]:
+    """The top-level modules of the distributions :func:`_direct_requirements` names."""
+    owners = _owners()
+    direct = _direct_requirements()
+    direct_names = {_normalise(re.split(r"[\s\[<>=!~;]", r, maxsplit=1)[0]) for r in direct}
+    return sorted(n for n, dists in owners.items() if direct_names & {_normalise(d) for d in dists})
+
+
+def _api_page_modules() -> list[str]:
+    """The modules the API pages document (``.. automodule::``)."""
+    pages = "".join(p.read_text(encoding="utf-8") for p in DOCS.glob("api/*.md"))
+    return sorted(set(re.findall(r"^\.\. automodule:: (\S+)$", pages, re.M)))
+
+
+def test_docs_extra_holds_what_the_api_pages_import(api_page_imports):
     # `pip install -e ".[docs]"` then the build of docs/README.md: autodoc imports every module
     # on the API pages (jaxkin.testing imports hypothesis), so each distribution that importing
     # them loads, beyond what importing the required ones loads, must be jaxkin's own dependency
-    # or the docs extra's, directly or through theirs.
-    tomllib = pytest.importorskip("tomllib")
-    from importlib import metadata
-
-    if _missing_docs_extra():
-        pytest.skip(f"the docs extra is not installed (no {', '.join(_missing_docs_extra())})")
-
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-    direct = project["dependencies"] + project["optional-dependencies"]["docs"]
-    allowed = _required(direct)
-    owners = metadata.packages_distributions()
-    direct_names = {_normalise(re.split(r"[\s\[<>=!~;]", r, maxsplit=1)[0]) for r in direct}
-    required_modules = sorted(
-        n for n, dists in owners.items() if direct_names & {_normalise(d) for d in dists}
-    )
-    pages = "".join(p.read_text(encoding="utf-8") for p in DOCS.glob("api/*.md"))
-    modules = sorted(set(re.findall(r"^\.\. automodule:: (\S+)$", pages, re.M)))
-    code = (
-        "import importlib, json, sys\n"
-        f"for m in {required_modules!r}:\n"
-        "    try:\n        importlib.import_module(m)\n"
-        "    except Exception:\n        pass\n"
-        "before = {n.split('.')[0] for n in sys.modules}\n"
-        f"for m in {modules!r}: importlib.import_module(m)\n"
-        "print(json.dumps(sorted({n.split('.')[0] for n in sys.modules} - before)))"
-    )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONWARNINGS": "ignore"}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True
-    )
-    imported = json.loads(proc.stdout.strip().splitlines()[-1])
-    loaded = {_normalise(d) for name in imported for d in owners.get(name, [])}
+    # or the docs extra's, directly or through theirs. The build's interpreter records the
+    # imports in a fresh interpreter before it builds (the ``site`` fixture).
+    pytest.importorskip("tomllib")
+    allowed = _required(_direct_requirements())
+    owners = _owners()
+    loaded = {_normalise(d) for name in api_page_imports for d in owners.get(name, [])}
     missing = sorted(loaded - allowed - {"jaxkin"})
     assert not missing, f"add to the docs extra in pyproject.toml: {missing}"
