@@ -151,7 +151,7 @@ def velocity_results(
     >>> import jax, jax.numpy as jnp, jaxkin as jk
     >>> from jaxkin.velocity import velocity_results
     >>> robot = jk.robots.load("two_link_planar")
-    >>> f = velocity_results(robot, check=True)
+    >>> f = jax.jit(velocity_results(robot, check=True))  # compiled once; jax.vmap(f) batches it
     >>> out = f(jnp.array([0.0, jnp.pi / 2]), jnp.array([1.0, 0.0]))
     >>> sorted(out)
     ['J', 'Ja', 'jac_err', 'margin', 'q', 'qd', 'sigma', 'twist']
