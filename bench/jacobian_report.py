@@ -325,7 +325,9 @@ def profile_table(rows: Rows) -> str:
     n = _profile_n(rows)
     intro = (
         f"Optimised HLO of each batched kernel at N = {fmt_n(n)}: loop fusions (each one pass "
-        "over the batch; `while` loops for the scan path), sin + cos ops compiled vs emitted by "
+        "over the batch; `while` loops for the scan path), multiplies (each fusion recomputes "
+        "what it does not read from another's buffer), the widest concatenate (XLA fuses "
+        "nothing into one of more than 8 operands), sin + cos ops compiled vs emitted by "
         "jaxkin (for the scan path: in the loop body, i.e. per joint step), and the compiled "
         "kernel's temporaries against its input + output per configuration (XLA's memory "
         "analysis)."
@@ -343,6 +345,8 @@ def profile_table(rows: Rows) -> str:
                 r["dtype"],
                 f"{h.get('fusions', '')}",
                 f"{h.get('whiles', '')}",
+                f"{h.get('multiplies', '')}",
+                f"{h.get('widest_concatenate', '')}",
                 f"{h.get('sincos_compiled', '')} / {h.get('sincos_emitted', '')}",
                 f"{h.get('temp_bytes_per_config', math.nan):.0f}",
                 f"{h.get('io_bytes_per_config', math.nan):.0f}",
@@ -355,12 +359,14 @@ def profile_table(rows: Rows) -> str:
         "dtype",
         "fusions",
         "while loops",
+        "multiplies",
+        "widest concat",
         "sin+cos compiled / emitted",
         "temp bytes / config",
         "in + out bytes / config",
         "rate",
     ]
-    return intro + "\n\n" + markdown_table(header, lines, "lll" + "r" * 6)
+    return intro + "\n\n" + markdown_table(header, lines, "lll" + "r" * 8)
 
 
 # ---------------------------------------------------------------------------- prose

@@ -107,8 +107,10 @@ QUICK = dict(
 
 
 def _hlo_stats(lowered, compiled, n: int) -> dict[str, Any]:
-    """Counts in the optimised HLO (fusions, while loops, dots, sin and cos) against the
-    sin/cos jaxkin emitted (StableHLO), and the compiled kernel's memory per configuration."""
+    """Counts in the optimised HLO (fusions, while loops, dots, multiplies, sin and cos) against
+    the sin/cos jaxkin emitted (StableHLO), the widest concatenate (XLA's CPU compiler fuses
+    nothing into one of more than 8 operands: each operand is then a loop of its own), and the
+    compiled kernel's memory per configuration."""
     out: dict[str, Any] = {}
     try:
         text = compiled.as_text()
@@ -123,6 +125,10 @@ def _hlo_stats(lowered, compiled, n: int) -> dict[str, Any]:
         fusions=len(re.findall(r" fusion\(", text)),
         whiles=len(re.findall(r" while\(", text)),
         dots=len(re.findall(r" dot\(", text)),
+        multiplies=len(re.findall(r" multiply\(", text)),
+        widest_concatenate=max(
+            (c.count("%") for c in re.findall(r" concatenate\(([^)]*)\)", text)), default=0
+        ),
         sincos_compiled=len(re.findall(r" (?:sine|cosine)\(", text)),
         sincos_emitted=len(re.findall(r"stablehlo\.(?:sine|cosine)\b", emitted)),
     )

@@ -151,3 +151,27 @@ def stack_matrix(rows, dtype) -> jax.Array:
     if isinstance(rows, (tuple, list)):
         return jnp.stack([stack_matrix(r, dtype) for r in rows])
     return materialize(rows, dtype)
+
+
+CONCAT_OPERANDS = 8
+"""The most operands of one concatenate the kernels emit (:func:`stack_vector`, the Jacobians'
+column blocks and frames): XLA's CPU compiler fuses nothing into a concatenate with more
+(``kMaxConcatenateArguments``) and compiles each operand as a loop of its own, each recomputing
+whatever elementwise work (a forward pass) it shares with the others."""
+
+
+def stack_vector(values, dtype) -> jax.Array:
+    """``jnp.stack(values)`` (a (k,) array of scalars) as nested stacks of at most
+    :data:`CONCAT_OPERANDS` operands each (rows of 8, zero-padded, reshaped and sliced back),
+    so XLA fuses the stacking into one loop with what computes the values."""
+    items = [materialize(v, dtype) for v in values]
+    k = len(items)
+    if k <= CONCAT_OPERANDS:
+        return jnp.stack(items)
+    w = CONCAT_OPERANDS
+    items += [jnp.zeros_like(items[0])] * (-k % w)
+    rows = [jnp.stack(items[i : i + w]) for i in range(0, len(items), w)]
+    while len(rows) > w:
+        rows += [jnp.zeros_like(rows[0])] * (-len(rows) % w)
+        rows = [jnp.stack(rows[i : i + w]).reshape(-1) for i in range(0, len(rows), w)]
+    return jnp.stack(rows).reshape(-1)[:k]

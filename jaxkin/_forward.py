@@ -171,7 +171,8 @@ def _joint_trig(robot: Robot, K: _Constants, qv: dict, joints, materialise: bool
     if not values:
         return {}
     keys = list(values)
-    v = jnp.stack([jnp.asarray(values[j]) for j in keys])
+    dtype = jnp.result_type(*values.values())  # as jnp.stack promotes them
+    v = fold.stack_vector([values[j] for j in keys], dtype)  # one fusion, however many joints
     if not materialise:
         c, s = jax.lax.optimization_barrier((jnp.cos(v), jnp.sin(v)))
         return {j: (c[i], s[i]) for i, j in enumerate(keys)}

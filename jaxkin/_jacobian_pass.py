@@ -117,14 +117,29 @@ def _is_zero_column(Jv: list, Jw: list, k: int) -> bool:
     return all(fold.is_const(x) and x == 0.0 for x in (*Jv[k], *Jw[k]))
 
 
+def _concatenate(parts: list, axis: int) -> jax.Array:
+    """``jnp.concatenate(parts, axis)`` in groups of at most ``fold.CONCAT_OPERANDS`` operands
+    (XLA may merge nested groups back into one concatenate: a copy of the fused parts then)."""
+    k = fold.CONCAT_OPERANDS
+    while len(parts) > k:
+        parts = [
+            parts[i] if len(parts[i : i + k]) == 1 else jnp.concatenate(parts[i : i + k], axis)
+            for i in range(0, len(parts), k)
+        ]
+    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis)
+
+
 def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
     """(6, nv) array from per-column 3-vectors of scalars.
 
     Columns that are constant zeros (joints off the frame's path) are placed statically: the
     matrix is the concatenation of one zeros block per run of them and one stacked block per run
-    of the others. No scatter: XLA fuses the whole assembly into the output loop, where a scatter
-    into a zeros block split the kernel into one fusion per entry, each recomputing the forward
-    pass (a humanoid hand: 97 fusions, 4,376 multiplies; statically placed: 46 and 509)."""
+    of at most ``fold.CONCAT_OPERANDS`` of the others. No scatter: XLA fuses the whole assembly
+    into the output loop, where a scatter into a zeros block split the kernel into one fusion
+    per entry, each recomputing the forward pass (a humanoid hand: 97 fusions, 4,376
+    multiplies; statically placed: 46 and 509). Nor a wider stack: XLA fuses nothing into a
+    concatenate of more operands (a G1 foot, whose free-flyer and leg columns form one run of
+    12: 68 fusions, 2,567 multiplies; in runs of at most 8: 28 and 304)."""
     dof = len(Jv)
     if dof == 0:
         return jnp.zeros((6, 0), dtype)
@@ -132,7 +147,8 @@ def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
     pieces = []
     start = 0
     for end in range(1, dof + 1):
-        if end < dof and zero[end] == zero[start]:
+        wide = not zero[start] and end - start >= fold.CONCAT_OPERANDS
+        if end < dof and zero[end] == zero[start] and not wide:
             continue
         if zero[start]:
             pieces.append(jnp.zeros((6, end - start), dtype))
@@ -142,7 +158,7 @@ def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
             rows += [[Jw[k][i] for k in cols] for i in range(3)]
             pieces.append(fold.stack_matrix(rows, dtype))
         start = end
-    return pieces[0] if len(pieces) == 1 else jnp.concatenate(pieces, axis=1)
+    return _concatenate(pieces, axis=1)
 
 
 class FrameJacobian(NamedTuple):
@@ -301,7 +317,7 @@ class FrameJacobians(NamedTuple):
         return self.each[0].dtype
 
     def matrix(self) -> jax.Array:
-        return jnp.stack([g.matrix() for g in self.each])
+        return _concatenate([g.matrix()[None] for g in self.each], axis=0)
 
     def times(self, qd: jax.Array) -> jax.Array:
         return jnp.stack([g.times(qd) for g in self.each])

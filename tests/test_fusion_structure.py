@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import jaxkin as jk
+from jaxkin import _fold as fold
 
 EPS = {np.float64: float(np.finfo(np.float64).eps), np.float32: float(np.finfo(np.float32).eps)}
 
@@ -86,3 +87,45 @@ def test_several_frames_compute_the_union_sines_once():
     fn = jax.vmap(lambda q: jk.geometric_jacobian(robot, q, frame=["l1", "l2"]))
     c = _hlo_counts(fn, _qs(robot, 4, np.float64))
     assert c["sine"] <= 1 and c["cosine"] <= 1, (c["sine"], c["cosine"])
+
+
+def _compiled(fn, x) -> tuple[Counter, list[int]]:
+    """Operation counts of the compiled program and, per concatenate in it (fused or not), its
+    number of operands."""
+    text = jax.jit(fn).lower(x).compile().as_text()
+    ops = Counter(re.findall(r"=\s*[^\s=]+\s+([a-z][a-z0-9\-]*)\(", text))
+    calls = re.findall(r"\sconcatenate\(([^)]*)\)", text)
+    return ops, [len(re.findall(r"%", c)) for c in calls]
+
+
+def test_wide_stacks_fuse_into_the_output():
+    """A free-flyer root and a 9-joint arm: its frame's 15 columns form one run and its 9 angles
+    one stack. XLA's CPU compiler fuses nothing into a concatenate of more than 8 operands, so
+    rows stacked 15 wide left each entry a fusion of its own, each recomputing the forward pass
+    (before: 97 fusions, 5,962 multiplies, a 15-operand concatenate; now 44 and 575, none
+    wider than 8)."""
+    robot = _arm(9)
+    fn = jax.vmap(lambda q: jk.geometric_jacobian(robot, q, frame="l8"))
+    c, widths = _compiled(fn, _qs(robot, 4, np.float64))
+    assert c["multiply"] <= 800 and c["fusion"] <= 55, (c["multiply"], c["fusion"])
+    assert max(widths) <= 8, widths
+
+
+def test_stack_vector_equals_a_stack():
+    """``fold.stack_vector`` (nested stacks of at most 8) gives ``jnp.stack``'s array, for
+    lengths around one and two levels of nesting."""
+    for k in (1, 8, 9, 70):
+        values = [jnp.float64(i + 0.5) for i in range(k)]
+        got = np.asarray(jax.jit(lambda *v: fold.stack_vector(v, jnp.float64))(*values))
+        np.testing.assert_array_equal(got, np.arange(k) + 0.5)
+
+
+def test_several_frames_share_one_fused_assembly():
+    """Four frames of a 3-joint arm under a free-flyer (9 columns each) in one call: each
+    frame's block fuses into the output (before: 46 fusions, 563 multiplies; now 28 and 182,
+    against 22 and 105 for the deepest frame alone)."""
+    robot = _arm()
+    x = _qs(robot, 4, np.float64)
+    fn = jax.vmap(lambda q: jk.geometric_jacobian(robot, q, frame=["l0", "l1", "l2", "l2"]))
+    c = _hlo_counts(fn, x)
+    assert c["multiply"] <= 250 and c["fusion"] <= 35, (c["multiply"], c["fusion"])
