@@ -367,9 +367,14 @@ def _robot_functions(robot: jk.Robot, q, qd) -> dict:
 
 def _robot_kernel(robot: jk.Robot, q, qd, *, names=None, derivatives=(), differentiate=()):
     """Values of the robot-level functions (those in ``names``, default all) and the
-    derivatives asked for, with respect to q and qd, of those in ``differentiate``."""
+    derivatives asked for, with respect to q and qd, of those in ``differentiate`` (whose values
+    ``_evaluate`` computes as called, so they are not traced a second time here)."""
     fns = _robot_functions(robot, q, qd)
-    values = {k: f(*a) for k, (f, a) in fns.items() if names is None or k in names}
+    values = {
+        k: f(*a)
+        for k, (f, a) in fns.items()
+        if (names is None or k in names) and k not in differentiate
+    }
     return _evaluate({k: fns[k] for k in differentiate}, values, derivatives)
 
 
