@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _xla import FAST_COMPILE, op_by_op
+from _xla import FAST_COMPILE
 from hypothesis import given
 
 import jaxkin as jk
@@ -58,13 +58,15 @@ def test_vmap_over_configurations_equals_loop(robot):
 
 def test_vmap_over_a_stack_of_robots(robot):
     rng = np.random.default_rng(1)
-    robots = [
+    robots = [  # new values and their stack made on the host (no eager program per leaf)
         robot.replace(
-            params={k: v + 0.05 * rng.normal(size=v.shape) for k, v in robot.params.items()}
+            params={
+                k: np.asarray(v) + 0.05 * rng.normal(size=v.shape) for k, v in robot.params.items()
+            }
         )
         for _ in range(5)
     ]
-    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *robots)
+    stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *robots)
     # one compiled program for the stack (at top level, vmap runs the kernel op by op)
     Js = jax.jit(jax.vmap(lambda r: jk.geometric_jacobian(r, Q)), compiler_options=FAST_COMPILE)(
         stacked
@@ -89,10 +91,11 @@ def test_grad_with_respect_to_dh_parameters_matches_finite_differences(robot):
     loss_of = jax.jit(loss, compiler_options=FAST_COMPILE)
     for key in ("a", "alpha", "d", "theta"):
         assert g.params[key].shape == robot.params[key].shape
+        value = np.asarray(robot.params[key])  # steps on the host: no program per update
         for i in range(robot.n_joints):
-            e = jnp.zeros(robot.n_joints).at[i].set(h)
-            plus = robot.replace(params={**robot.params, key: robot.params[key] + e})
-            minus = robot.replace(params={**robot.params, key: robot.params[key] - e})
+            e = h * np.eye(robot.n_joints)[i]
+            plus = robot.replace(params={**robot.params, key: value + e})
+            minus = robot.replace(params={**robot.params, key: value - e})
             fd = (loss_of(plus) - loss_of(minus)) / (2 * h)
             assert abs(float(g.params[key][i]) - float(fd)) < 1e-7, (key, i)
     # jacfwd with respect to the parameters works as well (forward mode)
@@ -118,11 +121,13 @@ def test_grad_with_respect_to_placement_parameters():
         return value_and_grad(r)[0]
 
     for key in ("xyz", "rpy"):
+        value = np.asarray(robot.params[key])  # steps on the host: no program per update
         for j in range(robot.n_joints):
             for k in range(3):
-                e = jnp.zeros((robot.n_joints, 3)).at[j, k].set(h)
-                plus = robot.replace(params={**robot.params, key: robot.params[key] + e})
-                minus = robot.replace(params={**robot.params, key: robot.params[key] - e})
+                e = np.zeros((robot.n_joints, 3))
+                e[j, k] = h
+                plus = robot.replace(params={**robot.params, key: value + e})
+                minus = robot.replace(params={**robot.params, key: value - e})
                 fd = f_of(plus) - f_of(minus)
                 assert abs(float(g.params[key][j, k]) - float(fd) / (2 * h)) < 1e-7
 
@@ -136,12 +141,13 @@ def test_new_parameter_values_never_retrace(robot):
         return jk.geometric_jacobian(r, q)
 
     jac(robot, Q).block_until_ready()
-    for s in (0.1, 0.2, 0.3):
+    for s in (0.1, 0.2, 0.3):  # new values made on the host (no eager program per update)
+        base = np.array(robot.base)
+        base[0, 3] = s
         r2 = robot.replace(
-            params={k: v * (1 + s) for k, v in robot.params.items()},
-            base=robot.base.at[0, 3].set(s),
+            params={k: np.asarray(v) * (1 + s) for k, v in robot.params.items()}, base=base
         )
-        jac(r2, Q + s).block_until_ready()
+        jac(r2, np.asarray(Q) + s).block_until_ready()
     assert len(traces) == 1
     # a new dtype is a new trace (expected); a new topology too
     jac(robot.astype(np.float32), Q.astype(np.float32)).block_until_ready()
@@ -156,27 +162,27 @@ def test_robot_pytree_has_only_float_leaves(robot):
 
 # --- float32 ------------------------------------------------------------------------------------
 @given(jkt.robots_and_configurations(1, 8, dtype=np.float32))
-@op_by_op
 def test_float32_within_float32_tolerance(robot_q):
     robot32, q = robot_q
-    q32 = jnp.asarray(q, dtype=jnp.float32)
+    q32 = np.asarray(q, dtype=np.float32)
     robot64 = robot32.astype(np.float64)
-    J32 = jk.geometric_jacobian(robot32, q32)  # op by op: the float32 result under test
+    # The float32 Jacobian under test, its float64 references and the autodiff Jacobian in one
+    # compiled program for this robot (the robot closed over, its constants folded, as in its
+    # eager executable): op by op, the float32 kernel compiles ten primitives or so per example
+    # (every new dof is a new shape), the float64 kernels every primitive again in float64, and
+    # jacfwd's vmap over the dof about 20 per dof, several times the cost of one program.
+    program = jax.jit(
+        lambda q32, q64: (
+            jk.geometric_jacobian(robot32, q32),
+            jk.geometric_jacobian(robot64, q64),
+            jk.fk_all(robot64, q64),
+            jk.jacobian_fwd(robot32, q32),
+        ),
+        compiler_options=FAST_COMPILE,
+    )
+    J32, J64, Ts, Jf = program(q32, q32.astype(np.float64))
     assert J32.dtype == jnp.float32
-    # The float64 references and the autodiff Jacobian in one compiled program for this robot:
-    # op by op, the float64 kernels compile every primitive again in float64, and jacfwd's vmap
-    # over the dof compiles every primitive again for each new dof (about 20 per dof), several
-    # times the cost of one kernel.
-    with jax.disable_jit(False):
-        references = jax.jit(
-            lambda q32, q64: (
-                jk.geometric_jacobian(robot64, q64),
-                jk.fk_all(robot64, q64),
-                jk.jacobian_fwd(robot32, q32),
-            ),
-            compiler_options=FAST_COMPILE,
-        )
-        J64, Ts, Jf = (np.asarray(x) for x in references(q32, np.asarray(q32, dtype=np.float64)))
+    J64, Ts, Jf = (np.asarray(x) for x in (J64, Ts, Jf))
     reach = max(1.0, float(np.max(np.linalg.norm(Ts[:, :3, 3] - Ts[:1, :3, 3], axis=1))))
     eps32 = np.finfo(np.float32).eps
     tol = 4 * eps32 * (1 + float(np.max(np.abs(q)))) * reach * robot32.dof * 4
