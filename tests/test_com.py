@@ -71,7 +71,10 @@ def test_center_of_mass_and_its_jacobian_match_pinocchio(name):
 def test_a_float32_robot_agrees_within_float32_rounding():
     robot, _, qs, c, J = pinocchio_case("erd/ur5_robot")
     r32, q32 = robot.astype(np.float32), qs[0].astype(np.float32)
-    c32, J32 = jk.center_of_mass(r32, q32), jk.com_jacobian(r32, q32)
+    # one float32 program for both (not an eager kernel per function)
+    both = jax.jit(lambda q: (jk.center_of_mass(r32, q), jk.com_jacobian(r32, q)),
+                   compiler_options=FAST_COMPILE)  # fmt: skip
+    c32, J32 = both(q32)
     assert c32.dtype == J32.dtype == np.float32 and r32.mass.dtype == np.float32
     np.testing.assert_allclose(c32, c[0], rtol=0, atol=2e-6)  # q rounded to float32 too
     np.testing.assert_allclose(J32, J[0], rtol=0, atol=2e-6)
@@ -282,10 +285,15 @@ def test_jit_vmap_over_configurations_and_over_a_stack_of_robots():
     robot = jk.load_urdf(URDF.format(base=INERTIAL.format(m=2), a=INERTIAL.format(m=1)))
     heavier = robot.replace(frame_mass=robot.frame_mass.at[1].mul(3.0))
     stack = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), robot, heavier)
-    cs = jax.jit(jax.vmap(jk.center_of_mass, in_axes=(0, None)))(stack, jnp.array([0.7]))
+    cs = jax.jit(jax.vmap(jk.center_of_mass, in_axes=(0, None)), compiler_options=FAST_COMPILE)(
+        stack, jnp.array([0.7])
+    )
     qs = jnp.array([0.7])
-    np.testing.assert_allclose(cs[0], jk.center_of_mass(robot, qs), rtol=0, atol=1e-15)
-    np.testing.assert_allclose(cs[1], jk.center_of_mass(heavier, qs), rtol=0, atol=1e-15)
+    # the references: one program taking the robot as an argument (eagerly, each robot value
+    # compiles its own kernel)
+    one = jax.jit(jk.center_of_mass, compiler_options=FAST_COMPILE)
+    np.testing.assert_allclose(cs[0], one(robot, qs), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(cs[1], one(heavier, qs), rtol=0, atol=1e-15)
     assert not np.allclose(cs[0], cs[1])
     np.testing.assert_allclose(stack.mass, [robot.mass, heavier.mass], rtol=1e-15)
 

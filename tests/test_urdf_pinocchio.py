@@ -35,6 +35,7 @@ from __future__ import annotations
 import time
 import warnings
 
+import jax
 import numpy as np
 import pytest
 from _urdf_support import (
@@ -50,6 +51,7 @@ from _urdf_support import (
     sample_configurations,
     tolerance,
 )
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 from jaxkin.urdf import MOVING_TYPES, parse_urdf
@@ -262,10 +264,15 @@ def test_float32_panda_within_float32_tolerance():
     urdf = parse_urdf(path)
     pmap = PinocchioMap(robot, urdf, pinocchio_model(path.read_text()))
     tip = robot.frame_names.index("panda_hand_tcp")
-    for q in random_q(robot, 3, seed=5):
+    qs = random_q(robot, 3, seed=5)
+
+    def both(q):
+        return jk.fk_all(robot, q), jk.geometric_jacobian(robot, q, frame="panda_hand_tcp")
+
+    # one float32 program for the three configurations (not an eager kernel per function)
+    Ts_all, J_all = jax.jit(jax.vmap(both), compiler_options=FAST_COMPILE)(qs.astype(np.float32))
+    for q, Ts, J in zip(qs, np.asarray(Ts_all), np.asarray(J_all), strict=True):
         q32 = q.astype(np.float32)
-        Ts = np.asarray(jk.fk_all(robot, q32))
-        J = np.asarray(jk.geometric_jacobian(robot, q32, frame="panda_hand_tcp"))
         assert Ts.dtype == np.float32 and J.dtype == np.float32
         T_pin, J_pin = pinocchio_frames_and_jacobians(pmap, q32.astype(np.float64))
         reach = max(1.0, float(np.max(np.linalg.norm(T_pin[:, :3, 3], axis=-1))))
