@@ -13,6 +13,7 @@ QUICK_COMPILE_FLAGS = (
     "--xla_backend_optimization_level=0",
     "--xla_llvm_disable_expensive_passes=true",
     "--xla_cpu_parallel_codegen_split_count=1",
+    "--xla_cpu_use_fusion_emitters=false",
 )
 """XLA flags of every process of the run (see :func:`_quick_compiles`)."""
 
@@ -23,9 +24,12 @@ def _quick_compiles() -> None:
     The suite's time is mostly compiling, and most programs it compiles run once on a few
     configurations: XLA still optimises the HLO as for users (same fusions, same operations, no
     fast-math) but LLVM generates its code at ``-O0``, several times faster to compile and about
-    half as fast to run. Results may differ in the last bit where ``-O3`` contracts a multiply
-    and an add into an FMA; tests/test_compile_options.py checks that the options a user's
-    process compiles with give the numbers the suite checks. Subprocesses (the CLI, README,
+    half as fast to run. Fusions are emitted by XLA's older elemental emitter, as jaxkin's own
+    jits already do (``jaxkin._jit.compiler_options``), for the test-local jits and the
+    primitives run op by op too (a tenth to a half less compile time for those). Results may
+    differ in the last bit where ``-O3`` contracts a multiply and an add into an FMA, or where
+    the two emitters round differently; tests/test_compile_options.py checks that the options a
+    user's process compiles with give the numbers the suite checks. Subprocesses (the CLI, README,
     doctests, notebooks) inherit ``XLA_FLAGS``. ``JAXKIN_TESTS_XLA_DEFAULTS=1`` runs the suite
     with XLA's own defaults.
     """
