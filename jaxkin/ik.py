@@ -405,26 +405,33 @@ def _idle_lanes(B: int, n: int, N: int, dtype, m: int = 6, nv: int | None = None
     )
 
 
-def _begin(lane: _Lane, free: jax.Array, job: jax.Array, seed: jax.Array, q: jax.Array) -> _Lane:
-    """Lanes where ``free``: start ``seed`` of target ``job`` from ``q`` (idle when ``job == N``).
-    Only what a new start reads is reset; ``e``, ``J`` and ``lam`` are set by its first
-    evaluation."""
+def _begin(lane: _Lane, free: jax.Array, job: jax.Array, seed: jax.Array) -> _Lane:
+    """Lanes where ``free``: start ``seed`` of target ``job`` (idle when ``job == N``); its
+    configuration is set by :func:`_place` at the next iteration. Only what a new start reads
+    is reset; ``e``, ``J`` and ``lam`` are set by its first evaluation."""
 
     def pick(new, old):
-        return jnp.where(free.reshape((-1,) + (1,) * (old.ndim - 1)), new, old)
+        return jnp.where(free, new, old)
 
     zero = jnp.zeros_like(lane.stall)
     inf = jnp.full_like(lane.err, jnp.inf)
     return lane._replace(
         job=pick(job, lane.job),
         seed=pick(seed, lane.seed),
-        q=pick(q, lane.q),
         err=pick(inf, lane.err),
         seed_steps=pick(zero, lane.seed_steps),
         stall=pick(zero, lane.stall),
-        best_q=pick(q, lane.best_q),
         best_err=pick(inf, lane.best_err),
         hit_max=lane.hit_max & ~free,
+    )
+
+
+def _place(lane: _Lane, begun: jax.Array, starts) -> _Lane:
+    """The lanes ``begun`` (B,) by :func:`_begin` placed at their start's configuration
+    (``starts(job, seed)``): one evaluation of ``starts`` per iteration, inside the loop."""
+    q = starts(lane.job, lane.seed)
+    return lane._replace(
+        q=jnp.where(begun[:, None], q, lane.q), best_q=jnp.where(begun[:, None], q, lane.best_q)
     )
 
 
@@ -535,11 +542,11 @@ def _lm_queue(
     )
 
     def cond(carry):
-        lane, _, _ = carry
-        return jnp.any(lane.job < N)
+        return jnp.any(carry[0].job < N)
 
     def body(carry):
-        lane, tg, queue = carry
+        lane, tg, queue, begun = carry
+        lane = _place(lane, begun, starts)
         busy = lane.job < N
         T_job = jax.tree_util.tree_map(lambda x: x[lane.job], T_pad)
         new, done, conv, stepped = step(T_job, unr_pad[lane.job], lane)
@@ -572,7 +579,7 @@ def _lm_queue(
         free = ~busy | done | abandon
         holding = jnp.where(free, N, at)
         job, seed, tg, queue = _hand_out(free, jnp.where(failed, at, N), holding, tg, queue, N, S)
-        return _begin(new, free, job, seed, starts(job, seed)), tg, queue
+        return _begin(new, free, job, seed), tg, queue, free
 
     B = lanes
     free0 = jnp.ones(B, bool)
@@ -580,8 +587,8 @@ def _lm_queue(
     zero = jnp.zeros((), jnp.int32)
     job0, seed0, tg0, queue0 = _hand_out(free0, none, none, tg0, (zero, zero), N, S)
     idle = _idle_lanes(B, n, N, dtype, m, nv)
-    lane0 = _begin(idle, free0, job0, seed0, starts(job0, seed0))
-    _, tg, _ = jax.lax.while_loop(cond, body, (lane0, tg0, queue0))
+    lane0 = _begin(idle, free0, job0, seed0)
+    _, tg, _, _ = jax.lax.while_loop(cond, body, (lane0, tg0, queue0, free0))
     return tg.q[:N], tg.steps[:N], tg.seed[:N], tg.hit_max[:N] > 0
 
 
@@ -965,7 +972,8 @@ def _solve_batch_impl(
     num_seeds,
     task=None,
 ):
-    """The jitted solve of a batch: ``_solve_core``'s loops, then ``_finish`` per target.
+    """The jitted solve of a batch: ``_solve_core``'s loops, their answer differentiable
+    (:func:`_solution`), then ``_finish`` per target.
 
     ``starts`` (int32): the starts per target of an LM solve, an argument (traced), so that
     calls differing only in ``num_seeds`` share one compiled solver, as ``max_steps`` and
@@ -976,12 +984,19 @@ def _solve_batch_impl(
         T_all = T_all.reshape(-1, 4, 4)
     static = (f, method, optimizer, lanes, num_seeds, task)
     args = (T_all, q0, pool, tol, lam0, max_steps, patience, starts)
-    # A concrete robot stays out of the differentiated arguments (static: constants folded); a
-    # traced one is an argument, so that derivatives reach its leaves.
-    if is_traced(robot):
-        q, steps, seed, hit_max, unreachable = _solve_core(None, static, robot, *args)
+    # The loops are traced once and never differentiated (their inputs' tangents stopped);
+    # ``_solution`` gives their answer its derivative. A concrete robot stays out of the
+    # differentiated arguments (static: constants folded); a traced one is an argument, so that
+    # derivatives reach its leaves.
+    traced = is_traced(robot)
+    loops_robot = jax.lax.stop_gradient(robot) if traced else robot
+    q, steps, seed, hit_max, unreachable = _solve_core(
+        loops_robot, static, *jax.lax.stop_gradient(args)
+    )
+    if traced:
+        q = _solution(None, static, robot, T_all, q)
     else:
-        q, steps, seed, hit_max, unreachable = _solve_core(robot, static, None, *args)
+        q = _solution(robot, static, None, T_all, q)
     if task is not None:
         return jax.vmap(
             lambda G, qq, k, sd, h, u: _finish_task(robot, task, G, qq, k, sd, h, u, tol)
@@ -991,13 +1006,9 @@ def _solve_batch_impl(
     )
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _solve_core(
-    robot_static, static, robot_traced, T_all, q0, pool, tol, lam0, max_steps, patience, starts
-):
-    """The solver loops: ``(q, steps, seed, hit_max, unreachable)`` per target. Differentiated
-    by :func:`_solve_core_jvp` (the implicit function theorem), never through the loops."""
-    robot = robot_static if robot_traced is None else robot_traced
+def _solve_core(robot, static, T_all, q0, pool, tol, lam0, max_steps, patience, starts):
+    """The solver loops: ``(q, steps, seed, hit_max, unreachable)`` per target, never
+    differentiated (:func:`_solution` gives ``q`` its derivative)."""
     f, method, optimizer, lanes, num_seeds, task = static
     if method == "lm":
         num_seeds = starts  # traced: one compile for every num_seeds
@@ -1043,30 +1054,37 @@ def _solve_core(
     return q, steps, seed, hit_max, unreachable
 
 
-@_solve_core.defjvp
-def _solve_core_jvp(robot_static, static, primals, tangents):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _solution(robot_static, static, robot_traced, T_all, q):
+    """``q``, the loops' solutions of the targets ``T_all`` (N, ...), unchanged; differentiated
+    by :func:`_solution_jvp` (the implicit function theorem), so that a derivative of a solve
+    traces the loops once, without their tangents."""
+    return q
+
+
+@_solution.defjvp
+def _solution_jvp(robot_static, static, primals, tangents):
     """``dq`` of every target by :func:`jaxkin.ik_gradients.solution_tangent` (see that
-    module's doc); the counters and flags have no tangent."""
-    out = _solve_core(robot_static, static, *primals)
-    robot_traced, T_all = primals[0], primals[1]
+    module's doc); ``q``'s own tangent is zero (the loops' inputs are stopped)."""
+    robot_traced, T_all, q = primals
     robot_dot, T_dot = tangents[0], tangents[1]
+    # q again through the rule: an outer derivative (a second order) sees q's dependence
+    q = _solution(robot_static, static, robot_traced, T_all, q)
     robot = robot_static if robot_traced is None else robot_traced
     f, task = static[0], static[-1]
-    q = out[0]
-    zeros = tuple(np.zeros(np.shape(x), jax.dtypes.float0) for x in out[1:])
     if task is not None:
         rb_dot = None if robot_traced is None else robot_dot
         dq = jax.vmap(lambda qq, G, Gd: _task_tangent(robot, task, qq, G, Gd, rb_dot))(
             q, T_all, jax.tree_util.tree_map(lambda x: x.astype(q.dtype), T_dot)
         )
-        return out, (dq.astype(q.dtype), *zeros)
+        return q, dq.astype(q.dtype)
     held = jax.vmap(lambda qq: _held(qq, _limits(robot, q.dtype)))(q)
     dq = jax.vmap(
         lambda qq, T, h, Td: solution_tangent(
             robot, qq, T, f, h, Td, None if robot_traced is None else robot_dot
         )
     )(q, T_all, held, T_dot.astype(T_all.dtype))
-    return out, (dq.astype(q.dtype), *zeros)
+    return q, dq.astype(q.dtype)
 
 
 def _held(q: jax.Array, lim: _Limits) -> jax.Array:
@@ -1134,7 +1152,8 @@ def solve_ik(
         one frame on its target).
       seeds: explicit extra starts instead of random ones: (S, nq), the same for every target,
         or (N, S, nq); tried after ``q0`` (brought within the limits; a floating base as
-        given), and no others. Excludes ``num_seeds``.
+        given), and no others. Excludes ``num_seeds``. For one frame of a fixed-base arm, a call
+        with seeds shares the compiled solver of one without (while ``N * S <= 4096``).
       optimizer: for ``method="optax"``: an optax ``GradientTransformation`` (default: L-BFGS
         with a backtracking line search). Optimisers hash by identity: one compile per object.
       damping: initial LM damping ``lambda`` (m^2, adapted at every step); default 1e-3 for one
@@ -1411,9 +1430,14 @@ targets (:func:`_start_fn`)."""
 def _pool(robot, seeds, key, n, S, dtype, method="lm"):
     """The (P, dof) starts after ``q0`` (see :func:`_start_fn`); for one start nothing is read
     from it: None for optax, zeros of the usual shape for LM (so that ``num_seeds=1`` shares the
-    compiled solver of the default ``num_seeds``)."""
+    compiled solver of the default ``num_seeds``). Given seeds are laid out one row per start
+    and target (``n (S - 1)`` rows, the rows :func:`_start_fn` reads), then padded with zeros to
+    the random pool's size: calls with and without ``seeds=`` share one compiled solver."""
     if seeds is not None:
-        return jnp.reshape(jnp.asarray(seeds, dtype), (-1, robot.nq))
+        xp = jnp if is_traced(seeds) else np  # host-side when concrete: no eager compiles
+        rows = xp.broadcast_to(xp.asarray(seeds, dtype), (n, S - 1, robot.nq))
+        rows = xp.pad(rows.reshape(-1, robot.nq), ((0, max(_POOL - n * (S - 1), 0)), (0, 0)))
+        return rows if xp is jnp else jax.device_put(rows)
     # A fixed size: the sampler compiles once per robot size, whatever the batch.
     size = max(_POOL, S - 1)
     if S == 1:

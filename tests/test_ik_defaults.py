@@ -207,12 +207,13 @@ def test_explicit_seeds_are_the_only_starts():
     T[:3, 3] = [1.0, 0.5, 0.3]  # within reach but out of the arm's plane: every start stalls
     q0 = np.array([0.1, 0.2])
     seeds = np.array([[1.0, -0.5], [-2.0, 1.0]])
-    # (6 lanes: the solver of the next test, the starts of one target side by side)
-    sol = _solve(planar, T, q0, seeds=seeds, lanes=6, max_steps=200)
+    # (6 lanes: the starts of one target side by side; the eager entry point: with seeds= or
+    # without, and in the next test, one compiled solver)
+    sol = jk.solve_ik(planar, T, q0, seeds=seeds, lanes=6, max_steps=200, throw=False)
     assert int(sol.result) == RESULTS.stalled and int(sol.seed) in (0, 1, 2)
     assert int(sol.steps) <= 3 * 200
     # while the default keeps restarting (64 starts), within its bound
-    many = _solve(planar, T, q0, max_steps=200)
+    many = jk.solve_ik(planar, T, q0, lanes=6, max_steps=200, throw=False)
     assert int(many.result) == RESULTS.stalled
     assert 3 * 200 < int(many.steps) <= jk.ik.DEFAULT_NUM_SEEDS * 200
 
@@ -225,7 +226,7 @@ def test_equal_failed_starts_report_the_first():
     T[:3, 3] = [1.0, 0.5, 0.3]  # out of the arm's plane: every start stalls
     q0 = np.array([0.1, 0.2])
     # three equal starts (q0 and two copies) on six lanes (the solver of the test above)
-    sol = _solve(planar, T, q0, seeds=np.tile(q0, (2, 1)), lanes=6, max_steps=200)
+    sol = jk.solve_ik(planar, T, q0, seeds=np.tile(q0, (2, 1)), lanes=6, max_steps=200, throw=False)
     assert int(sol.result) == RESULTS.stalled and int(sol.seed) == 0
 
 

@@ -3,7 +3,8 @@ central finite differences of re-solved IK, and TRAC-IK's protocol on a few hund
 
 Every solve in a file goes through one compiled function per robot (``_Solver``): the JVP of a
 batched ``solve_ik`` with the default settings except ``tol`` and ``damping`` (arrays, so one
-compile serves the tight finite-difference solves and the default protocol). Finite differences
+compile serves the tight finite-difference solves and the default protocol) and one lane (the
+answers do not depend on the lanes; one compiles cheaper). Finite differences
 re-solve the perturbed targets ``T exp(+-h X_j)`` (``X_j`` the six se(3) generators) warm-started
 at the solution, to ``tol = 1e-13``, Richardson-extrapolated from h = 1e-5 and 2h: what the
 derivative of a redundant arm's solution is defined to be (the solution nearest to the current
@@ -70,9 +71,14 @@ class _Solver:
 
         def run(T, q0, T_dot, tol, damping):
             def solve(T):
-                return jk.solve_ik(robot, T, q0, tol=tol, damping=damping, throw=False)
+                # one lane: the same answers (the first converging start wins, whatever the
+                # lanes: test_ik_defaults.py), a third cheaper to compile than 64
+                sol = jk.solve_ik(robot, T, q0, tol=tol, damping=damping, lanes=1, throw=False)
+                return sol.q, sol
 
-            return jax.jvp(solve, (T,), (T_dot,))
+            # only q's tangent is returned: the other fields' tangents are not compiled
+            _, dq, sol = jax.jvp(solve, (T,), (T_dot,), has_aux=True)
+            return sol, dq
 
         self.fn = jax.jit(run, compiler_options=FAST_COMPILE)
 
@@ -83,9 +89,9 @@ class _Solver:
         pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - n, 0)], 0)  # noqa: E731
         T_dot = np.zeros_like(T) if T_dot is None else np.asarray(T_dot)
         q0 = np.broadcast_to(np.asarray(q0), (n, self.robot.dof))
-        sol, dsol = self.fn(pad(T), pad(q0), pad(T_dot), jnp.asarray(tol), jnp.asarray(damping))
+        sol, dq = self.fn(pad(T), pad(q0), pad(T_dot), jnp.asarray(tol), jnp.asarray(damping))
         cut = lambda x: np.asarray(x)[:n]  # noqa: E731
-        return jax.tree_util.tree_map(cut, sol), cut(dsol.q)
+        return jax.tree_util.tree_map(cut, sol), cut(dq)
 
 
 @pytest.fixture(scope="module")
@@ -445,6 +451,30 @@ def test_float32_jacrev_under_jit_and_vmap(solvers):
     assert np.all(sol.converged)
     scale = np.max(np.abs(dq64))
     np.testing.assert_allclose(dq32, dq64, rtol=0, atol=1e-3 * scale)
+
+
+def test_a_derivative_traces_the_loops_once(monkeypatch):
+    """The solver's loops are traced once under ``jvp`` (and ``grad``): the derivative rule
+    reuses the loops' answer instead of tracing the solve a second time (a whole-body build
+    spent a third of its tracing there). Tracing only, no compile; a robot of this test's own
+    (no cached trace)."""
+    rows = [dict(a=0.4, alpha=0.0, d=0.0, theta=0.0, joint="revolute", lower=-3, upper=3)] * 2
+    arm = jk.Robot.from_dh(rows, name="traced_once", dtype=np.float64)
+    calls = []
+    queue = jk.ik._lm_queue
+    monkeypatch.setattr(jk.ik, "_lm_queue", lambda *a, **k: calls.append(1) or queue(*a, **k))
+    T = np.eye(4)  # fk at q = (0.3, -0.5), written out (no kernel compiled)
+    c, s = np.cos(-0.2), np.sin(-0.2)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = 0.4 * np.array([np.cos(0.3) + c, np.sin(0.3) + s])
+
+    def q_of(T):
+        return jk.solve_ik(arm, T, jnp.zeros(2), num_seeds=1, throw=False).q
+
+    jax.make_jaxpr(lambda T: jax.jvp(q_of, (T,), (T,)))(T)
+    assert len(calls) == 1
+    jax.make_jaxpr(jax.grad(lambda T: jnp.sum(q_of(T))))(np.stack([T, T]))  # a new shape
+    assert len(calls) == 2
 
 
 # ----------------------------------------------------------------------------- the rank test

@@ -126,7 +126,7 @@ def legs_draw() -> np.ndarray:
 @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight):
     def solve(T):
-        return jk.solve_ik(
+        sol = jk.solve_ik(
             LEGS,
             T,
             jk.neutral(LEGS),
@@ -138,8 +138,11 @@ def _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight):
             posture_weight=posture_weight,
             throw=False,
         )
+        return sol.q, sol
 
-    return jax.jvp(solve, (T,), (T_dot,))
+    # only q's tangent is returned: the other fields' tangents are not compiled
+    _, dq, sol = jax.jvp(solve, (T,), (T_dot,), has_aux=True)
+    return sol, dq
 
 
 def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0, T_dot=None):
@@ -149,8 +152,7 @@ def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0, T_dot=None):
     _, com, q_ref = legs_case()
     T_dot = np.zeros_like(T) if T_dot is None else T_dot
     weights = np.broadcast_to(weights, (2, 6))
-    sol, dsol = _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight)
-    return sol, dsol.q
+    return _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight)
 
 
 def test_ball_joints_and_a_floating_base_converge_with_unit_quaternions():
