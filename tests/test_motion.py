@@ -35,8 +35,12 @@ def smooth_trajectory(robot: jk.Robot, q0, n: int, seed: int, scale: float = 0.3
     limits), and the time steps' largest change ``|difference(q_t, q_{t+1})|``."""
     t = np.linspace(0.0, 1.5, n)
     V = np.random.default_rng(seed).normal(size=(4, robot.nv))
-    vel = jnp.asarray(np.sin(np.outer(t, [1.0, 2.0, 3.0, 4.0])) @ V * scale, robot.dtype)
-    qs = kernels(robot).integrate(jnp.asarray(q0, robot.dtype), vel)
+    vel = (np.sin(np.outer(t, [1.0, 2.0, 3.0, 4.0])) @ V * scale).astype(robot.dtype)
+    if robot.multi_dof_joints:
+        qs = kernels(robot).integrate(jnp.asarray(q0, robot.dtype), jnp.asarray(vel))
+    else:  # scalar joints (the arms) add v: numpy, nothing to compile
+        lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+        qs = np.clip(np.asarray(q0, robot.dtype) + vel, lo, hi)
     return qs, max_step(robot, qs)
 
 
@@ -56,9 +60,12 @@ def kernels(robot: jk.Robot) -> types.SimpleNamespace:
 
 
 def max_step(robot: jk.Robot, qs) -> float:
-    """The largest entry of ``difference(q_t, q_{t+1})`` over a sequence (n, nq)."""
-    qs = jnp.asarray(qs)
-    return float(jnp.max(jnp.abs(kernels(robot).gaps(qs[:-1], qs[1:]))))
+    """The largest entry of ``difference(q_t, q_{t+1})`` over a sequence (n, nq): numpy's
+    difference for a robot of scalar joints only (the arms), else ``jk.difference`` compiled."""
+    qs = np.asarray(qs)
+    if not robot.multi_dof_joints:
+        return float(np.max(np.abs(np.diff(qs, axis=0))))
+    return float(np.max(np.abs(np.asarray(kernels(robot).gaps(qs[:-1], qs[1:])))))
 
 
 def fk_frames(robot, qs, frames):

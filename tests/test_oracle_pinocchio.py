@@ -208,13 +208,19 @@ def modified_dh_urdf(robot: jk.Robot) -> str:
 
 
 def _kernel(robot: jk.Robot, qs: jax.Array):
-    """fk_all and the geometric Jacobian of every frame in every reference, batched over qs."""
+    """fk_all and the geometric Jacobian of every frame in every reference, batched over qs: all
+    frames in one call per reference (``frame=[...]``), and the last frame's single-frame call."""
+
+    frames = list(robot.frame_names)
 
     def one(q):
         out = {"Ts": jk.fk_all(robot, q)}
-        for f in robot.frame_names:
-            for ref in REFERENCES:
-                out[f"{f}/{ref}"] = jk.geometric_jacobian(robot, q, frame=f, reference=ref)
+        for ref in REFERENCES:
+            # every frame in one pass (one program, not one per frame and reference) ...
+            Js = jk.geometric_jacobian(robot, q, frame=frames, reference=ref)
+            out.update({f"{f}/{ref}": J for f, J in zip(frames, Js, strict=True)})
+            # ... and the single-frame call, for the last frame
+            out[f"one/{ref}"] = jk.geometric_jacobian(robot, q, frame=frames[-1], reference=ref)
         return out
 
     return jax.vmap(one)(qs)
@@ -314,3 +320,12 @@ def test_geometric_jacobian_matches_pinocchio_every_frame_and_reference(case):
                     atol=tol,
                     err_msg=f"{name} frame {fname} reference {ref} q={q}",
                 )
+        for ref, rf in REFERENCES.items():  # the single-frame call, for the last frame
+            expected = pin.getFrameJacobian(model, data, fids[-1], rf)[:, iv]
+            np.testing.assert_allclose(
+                out[f"one/{ref}"][k],
+                expected,
+                rtol=0,
+                atol=tol,
+                err_msg=f"{name} single-frame call, frame {robot.frame_names[-1]} reference {ref}",
+            )
