@@ -33,6 +33,7 @@ from ._forward import (
     scan_steps,
     shared_scalar_pass,
 )
+from ._jit import op_by_op, padded_to_block
 from .configuration import integrate_kernel
 from .model import Robot
 from .representations import from_matrix, representation_margin
@@ -486,8 +487,15 @@ def _concatenated(c, runs: list, dtype) -> jax.Array:
     return parts[0] if len(parts) == 1 else jnp.concatenate(parts)
 
 
+def _op_by_op_widened(x: jax.Array) -> jax.Array:
+    """``x`` padded to a block (:func:`jaxkin._jit.padded_to_block`) when run op by op
+    (``jax.disable_jit()``), else ``x`` itself."""
+    return padded_to_block(x) if op_by_op() else x
+
+
 def _pose_fn(robot: Robot, frame: int, point: jax.Array | None):
-    """Returns ``f(q) -> (p_point, R_frame)`` used by the autodiff Jacobians."""
+    """Returns ``f(q) -> (p_point, R_frame)`` used by the autodiff Jacobians (``q`` may carry
+    entries beyond ``robot.nq``: the forward pass reads its entries by index, never the rest)."""
 
     def f(q):
         R, p = frame_pose(robot, q, frame)
@@ -526,26 +534,40 @@ def autodiff_jacobian(
     q: jax.Array,
     frame: int | tuple[int, ...],
     point: jax.Array | None,
-    reference: str,
+    reference: str | tuple[str, ...],
     mode: str,
-) -> jax.Array:
+) -> jax.Array | tuple[jax.Array, ...]:
     """The geometric Jacobian by ``jax.jacfwd`` (``mode="fwd"``) or ``jax.jacrev`` (``"rev"``)
     of forward kinematics: (6, nv) for one frame index (``point`` None or (3,)), (k, 6, nv) for a
     tuple of them (``point`` None or (k, 3); one shared forward pass, differentiated once). For
-    a robot with ``nq != nv`` along ``integrate(robot, q, v)`` at ``v = 0``. Unchecked."""
+    a robot with ``nq != nv`` along ``integrate(robot, q, v)`` at ``v = 0``. ``reference`` one
+    reference, or a tuple of them: then a tuple of Jacobians, one per reference, from one
+    differentiation (each equal to the Jacobian of that reference alone). Op by op
+    (``jax.disable_jit()``) a robot with ``nq == nv`` is differentiated on a widened ``q``
+    (:func:`_op_by_op_widened`). Unchecked."""
     several = isinstance(frame, tuple)
     pose = _poses_fn(robot, frame, point) if several else _pose_fn(robot, frame, point)
     jac = jax.jacfwd if mode == "fwd" else jax.jacrev
     q = q.astype(result_dtype(robot, q))
-    if robot.nq == robot.nv:
+    nv = robot.nv
+    if robot.nq == nv:
+        q = _op_by_op_widened(q)
         dp, dR = jac(pose)(q)
     else:  # differentiate along the configuration manifold: v -> pose(integrate(q, v)) at 0
-        v0 = jnp.zeros(robot.nv, q.dtype)
+        v0 = jnp.zeros(nv, q.dtype)
         dp, dR = jac(lambda v: pose(integrate_kernel(robot, q, v)))(v0)
     p, R = pose(q.astype(dp.dtype))
-    if several:
-        return jax.vmap(lambda *a: _jacobian_from_derivs(*a, reference))(p, R, dp, dR)
-    return _jacobian_from_derivs(p, R, dp, dR, reference)
+
+    def in_reference(ref: str) -> jax.Array:
+        if several:
+            J = jax.vmap(lambda *a: _jacobian_from_derivs(*a, ref))(p, R, dp, dR)
+        else:
+            J = _jacobian_from_derivs(p, R, dp, dR, ref)
+        return J if J.shape[-1] == nv else J[..., :nv]
+
+    if isinstance(reference, tuple):
+        return tuple(in_reference(ref) for ref in reference)
+    return in_reference(reference)
 
 
 def analytical_jacobian_pass(
@@ -557,14 +579,15 @@ def analytical_jacobian_pass(
     method: str = "chain",
 ) -> tuple[jax.Array, jax.Array]:
     """The kernel of ``jk.analytical_jacobian`` on checked arguments: ``(J_a (6, nv), margin)``,
-    unmasked (see :func:`jacobian_pass` for the arguments)."""
+    unmasked (see :func:`jacobian_pass` for the arguments). Op by op (``jax.disable_jit()``) on
+    widened columns (:func:`_op_by_op_widened`)."""
     pt = point
     dtype = result_dtype(robot, q)
     to_phi = lambda R: from_matrix(R, representation)  # noqa: E731
 
     if method == "chain":
         g = jacobian_pass(robot, q, frame, pt, "world_aligned")
-        J = g.matrix()
+        J = _op_by_op_widened(g.matrix())  # every column on its own below
         R = g.rotation()
         phi = to_phi(R)
         dphi_dR = jax.jacfwd(to_phi)(R)  # (3, 3, 3): d phi_i / d R_ab
@@ -589,10 +612,12 @@ def analytical_jacobian_pass(
             return jnp.concatenate([p, phi]), phi
 
         if robot.nq == robot.nv:
-            Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(q.astype(dtype))
+            Ja, phi = jax.jacfwd(x_of_q, has_aux=True)(_op_by_op_widened(q.astype(dtype)))
         else:
             qq = q.astype(dtype)
             Ja, phi = jax.jacfwd(lambda v: x_of_q(integrate_kernel(robot, qq, v)), has_aux=True)(
                 jnp.zeros(robot.nv, dtype)
             )
+    if Ja.shape[-1] != robot.nv:
+        Ja = Ja[:, : robot.nv]
     return Ja, representation_margin(phi, representation)

@@ -197,3 +197,30 @@ def eager_cache_info() -> dict:
         "entries": len(_eager_cache),
         "executables": sum(v._cache_size() for v in _eager_cache.values()),
     }
+
+
+OP_BY_OP_BLOCK = 8
+"""Block width of the arrays padded by :func:`padded_to_block`."""
+
+
+def op_by_op() -> bool:
+    """Whether JAX runs operations one by one here (``jax.disable_jit()``)."""
+    return bool(jax.config.jax_disable_jit)
+
+
+def padded_to_block(x, width: int | None = None) -> jax.Array:
+    """``x`` with zeros appended to its last axis up to ``width`` entries (default: the next
+    multiple of :data:`OP_BY_OP_BLOCK`, at least one block); on the host when ``x`` is concrete.
+
+    Run op by op, every primitive compiles once per shape: Jacobian columns (or a ``q`` that the
+    forward pass reads entry by entry, so that its padding is never read) padded to a block have
+    one shape for every robot of up to 8 (16, ...) velocity entries, and compile once, not once
+    per number of joints. Each real entry is the same arithmetic as without padding; cut the
+    padding off at the end."""
+    n = x.shape[-1]
+    if width is None:
+        width = max(1, -(-n // OP_BY_OP_BLOCK)) * OP_BY_OP_BLOCK
+    pad = [(0, 0)] * (len(x.shape) - 1) + [(0, width - n)]
+    if is_traced(x):
+        return jnp.pad(x, pad)
+    return jax.device_put(np.pad(np.asarray(x), pad))

@@ -45,10 +45,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import spatial
-from ._checks import check_q, refuse_multi_dof, result_dtype
+from ._checks import (
+    check_point,
+    check_q,
+    check_reference,
+    refuse_multi_dof,
+    result_dtype,
+)
 from ._forward import forward_pass, frame_pose
-from ._jit import one_shot_compiler_options
-from .jacobians import REFERENCES, geometric_jacobian, jacobian_fwd, jacobian_rev
+from ._jacobian_pass import autodiff_jacobian
+from ._jit import OP_BY_OP_BLOCK, one_shot_compiler_options, padded_to_block
+from .jacobians import REFERENCES, geometric_jacobian
 from .model import Robot
 from .sampling import sampling_bounds
 
@@ -251,7 +258,6 @@ def configurations(robot: Robot, margin: float = 0.0) -> st.SearchStrategy[np.nd
     return st.tuples(*elems).map(to_manifold)
 
 
-_FD_ROWS = 8  # finite-difference steps are taken in blocks of this many columns
 _ROWS = {"all": slice(0, 6), "translation": slice(0, 3), "rotation": slice(3, 6)}
 
 
@@ -385,33 +391,41 @@ def finite_difference_jacobian(
     ).astype(jnp.float64)
     f = robot.frame_index(frame)
     pt = None if point is None else jnp.asarray(point, dtype=jnp.float64)
-    return np.asarray(_fd_in(reference, *_fd_world_aligned(robot, q, f, pt, h)))
+    J = _fd_in(reference, *_fd_world_aligned(robot, q, f, pt, h))
+    return np.asarray(J)[:, : robot.nv]
 
 
 def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
     """``(Jv, Jw, p0, R0)``: finite-difference columns in base axes at the (offset) point, and the
-    pose at ``q`` (float64 robot and ``q``; traceable)."""
+    pose at ``q`` (float64 robot and ``q``; traceable). The columns are padded with zero columns
+    to a multiple of :data:`OP_BY_OP_BLOCK` (cut them off with ``[:, :robot.nv]``)."""
 
     def pose(qq):
         R, p = frame_pose(robot, qq, f)
         return (p if pt is None else p + R @ pt), R
 
     nv = robot.nv
-    # One row per column, padded with zero steps to a multiple of _FD_ROWS: op by op (property
-    # tests under jax.disable_jit) the batched operations then have one shape per block of
-    # _FD_ROWS columns, not one per robot size, and compile once for all robots up to that size.
-    eye = jnp.eye(-(-nv // _FD_ROWS) * _FD_ROWS, nv, dtype=jnp.float64)
-    if robot.nq == robot.nv:
-        p_plus, R_plus = jax.vmap(pose)(q[None, :] + h * eye)
-        p_minus, R_minus = jax.vmap(pose)(q[None, :] - h * eye)
+    # Every step (+h and -h along each column) is a row of one batch, the columns padded with
+    # zero steps to a multiple of OP_BY_OP_BLOCK and cut off only at the end: op by op (property
+    # tests under jax.disable_jit) every batched operation then has one shape per block of
+    # columns, not one per robot size, and compiles once for all robots up to that size.
+    wide = max(1, -(-nv // OP_BY_OP_BLOCK)) * OP_BY_OP_BLOCK
+    if robot.nq == nv:
+        # q widened to as many entries (the forward pass reads q's entries by index: the
+        # padding is never read), so even the steps have one shape per block
+        x = padded_to_block(q, wide)
+        steps = h * jnp.eye(wide, dtype=jnp.float64)
+        ps, Rs = jax.vmap(pose)(jnp.concatenate([x[None, :] + steps, x[None, :] - steps]))
     else:  # steps along the configuration manifold (free, ball, planar joints)
         from .configuration import integrate_kernel
 
-        p_plus, R_plus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, h * e)))(eye)
-        p_minus, R_minus = jax.vmap(lambda e: pose(integrate_kernel(robot, q, -h * e)))(eye)
-    Jv = ((p_plus - p_minus)[:nv] / (2 * h)).T
-    Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(R_plus, R_minus)[:nv] / (2 * h)).T
-    p0, R0 = pose(q)
+        eye = jnp.eye(wide, nv, dtype=jnp.float64)
+        steps = jnp.concatenate([h * eye, -h * eye])
+        ps, Rs = jax.vmap(lambda v: pose(integrate_kernel(robot, q, v)))(steps)
+        x = q
+    Jv = ((ps[:wide] - ps[wide:]) / (2 * h)).T
+    Jw = (jax.vmap(lambda a, b: spatial.log_so3(a @ b.T))(Rs[:wide], Rs[wide:]) / (2 * h)).T
+    p0, R0 = pose(x)
     return Jv, Jw, p0, R0
 
 
@@ -441,35 +455,42 @@ def assert_jacobian_consistent(
     only in float64 (default: whenever x64 is on and the robot is float64). Everything is
     evaluated by one compiled program per call (one compile for a robot used once, as in a
     property test over random robots), with jaxkin's compiler options and XLA's cheapest backend
-    passes (the program runs once: compiling is its cost).
+    passes (the program runs once: compiling is its cost). The autodiff Jacobians of all
+    ``references`` come from one ``jax.jacfwd`` and one ``jax.jacrev`` of forward kinematics,
+    each reference's columns converted as :func:`jaxkin.jacobian_fwd` and
+    :func:`jaxkin.jacobian_rev` convert them. Under ``jax.disable_jit()`` it runs op by op, the
+    autodiff and finite-difference columns padded to a block of 8: each operation compiles once
+    per block, not once per robot size (a property over random robots, each used once).
     """
     fn = "jk.testing.assert_jacobian_consistent"
     q = check_q(robot, q, fn=fn, batch_hint=f"[{fn}(robot, q) for q in qs]")
+    references = tuple(check_reference(ref) for ref in references)
     is64 = result_dtype(robot, q) == np.float64
     fd = finite_differences if finite_differences is not None else is64
     if fd and not jax.config.read("jax_enable_x64"):
         raise RuntimeError("finite differences need jax_enable_x64 (float64).")
     f = robot.frame_index(frame)
+    pt = check_point(point, result_dtype(robot, q), fn)
     robot64 = robot.astype(np.float64) if fd else None
     pt64 = None if point is None or not fd else jnp.asarray(point, dtype=jnp.float64)
 
     def values(q):
-        Ts = forward_pass(robot, q)
-        reach = jnp.max(jnp.linalg.norm(Ts.p - Ts.p[:1], axis=1))
         fd_parts = _fd_world_aligned(robot64, q.astype(jnp.float64), f, pt64, 1e-6) if fd else None
+        fwd = autodiff_jacobian(robot, q, f, pt, references, "fwd")
+        rev = autodiff_jacobian(robot, q, f, pt, references, "rev")
         out = {}
-        for ref in references:
+        for ref, Jf, Jr in zip(references, fwd, rev, strict=True):
             out[ref] = (
                 geometric_jacobian(robot, q, frame=frame, point=point, reference=ref),
-                jacobian_fwd(robot, q, frame=frame, point=point, reference=ref),
-                jacobian_rev(robot, q, frame=frame, point=point, reference=ref),
-                _fd_in(ref, *fd_parts) if fd else None,
+                Jf,
+                Jr,
+                _fd_in(ref, *fd_parts)[:, : robot.nv] if fd else None,
             )
-        return reach, out
+        return forward_pass(robot, q).p, out
 
     program = jax.jit(values, compiler_options=one_shot_compiler_options() or None)
-    reach, out = jax.device_get(program(q))
-    reach = float(reach)
+    origins, out = jax.device_get(program(q))
+    reach = float(np.max(np.linalg.norm(origins - origins[:1], axis=1)))
     tol = atol if atol is not None else (1e-12 if is64 else 1e-5) * max(1.0, reach)
     for ref in references:
         J, Jf, Jr, Jd = out[ref]
