@@ -208,9 +208,14 @@ def op_by_op() -> bool:
     return bool(jax.config.jax_disable_jit)
 
 
+def block_width(n: int) -> int:
+    """``n`` rounded up to a multiple of :data:`OP_BY_OP_BLOCK` (at least one block)."""
+    return max(1, -(-n // OP_BY_OP_BLOCK)) * OP_BY_OP_BLOCK
+
+
 def padded_to_block(x, width: int | None = None) -> jax.Array:
-    """``x`` with zeros appended to its last axis up to ``width`` entries (default: the next
-    multiple of :data:`OP_BY_OP_BLOCK`, at least one block); on the host when ``x`` is concrete.
+    """``x`` with zeros appended to its last axis up to ``width`` entries (default:
+    :func:`block_width`); on the host when ``x`` is concrete.
 
     Run op by op, every primitive compiles once per shape: Jacobian columns (or a ``q`` that the
     forward pass reads entry by entry, so that its padding is never read) padded to a block have
@@ -219,7 +224,7 @@ def padded_to_block(x, width: int | None = None) -> jax.Array:
     padding off at the end."""
     n = x.shape[-1]
     if width is None:
-        width = max(1, -(-n // OP_BY_OP_BLOCK)) * OP_BY_OP_BLOCK
+        width = block_width(n)
     pad = [(0, 0)] * (len(x.shape) - 1) + [(0, width - n)]
     if is_traced(x):
         return jnp.pad(x, pad)

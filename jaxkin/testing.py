@@ -54,7 +54,7 @@ from ._checks import (
 )
 from ._forward import forward_pass, frame_pose
 from ._jacobian_pass import autodiff_jacobian
-from ._jit import OP_BY_OP_BLOCK, one_shot_compiler_options, padded_to_block
+from ._jit import block_width, one_shot_compiler_options, padded_to_block
 from .jacobians import REFERENCES, geometric_jacobian
 from .model import Robot
 from .sampling import sampling_bounds
@@ -398,7 +398,7 @@ def finite_difference_jacobian(
 def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
     """``(Jv, Jw, p0, R0)``: finite-difference columns in base axes at the (offset) point, and the
     pose at ``q`` (float64 robot and ``q``; traceable). The columns are padded with zero columns
-    to a multiple of :data:`OP_BY_OP_BLOCK` (cut them off with ``[:, :robot.nv]``)."""
+    to :func:`jaxkin._jit.block_width` columns (cut them off with ``[:, :robot.nv]``)."""
 
     def pose(qq):
         R, p = frame_pose(robot, qq, f)
@@ -406,10 +406,10 @@ def _fd_world_aligned(robot: Robot, q, f: int, pt, h: float):
 
     nv = robot.nv
     # Every step (+h and -h along each column) is a row of one batch, the columns padded with
-    # zero steps to a multiple of OP_BY_OP_BLOCK and cut off only at the end: op by op (property
+    # zero steps to a block (``block_width``) and cut off only at the end: op by op (property
     # tests under jax.disable_jit) every batched operation then has one shape per block of
     # columns, not one per robot size, and compiles once for all robots up to that size.
-    wide = max(1, -(-nv // OP_BY_OP_BLOCK)) * OP_BY_OP_BLOCK
+    wide = block_width(nv)
     if robot.nq == nv:
         # q widened to as many entries (the forward pass reads q's entries by index: the
         # padding is never read), so even the steps have one shape per block
