@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _oracle_modules import lazy_module
 from _xla import FAST_COMPILE
 from hypothesis import example, given
 from hypothesis import strategies as st
@@ -28,7 +29,8 @@ from jaxkin import spatial
 with warnings.catch_warnings():  # the oracles are test dependencies (the test extra)
     warnings.simplefilter("ignore", DeprecationWarning)
     import pinocchio as pin
-    import spatialmath.base as smb
+
+smb = lazy_module("spatialmath.base")  # imported by the test that uses it
 
 TOL = {np.float64: 1e-12, np.float32: 1e-5}
 DTYPES = [np.float64, np.float32]

@@ -21,24 +21,21 @@ frame ("link7") is also compared with RTB's chain with its tool removed.
 from __future__ import annotations
 
 import math
-import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _oracle_modules import lazy_module
 from _sampling import random_q
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
 
-with warnings.catch_warnings():
-    # The toolbox and spatialmath import cleanly today; keep a future import-time deprecation in
-    # a dependency from failing collection (warnings are errors in this suite).
-    warnings.simplefilter("ignore", DeprecationWarning)
-    rtb = pytest.importorskip("roboticstoolbox")
-    sm = pytest.importorskip("spatialmath")
-    smb = pytest.importorskip("spatialmath.base")
+# imported by the first test that uses them (tests/_oracle_modules.py), not at collection
+rtb = lazy_module("roboticstoolbox")
+sm = lazy_module("spatialmath")
+smb = lazy_module("spatialmath.base")
 
 N_CONFIGS = 50
 SEED = 20240611
