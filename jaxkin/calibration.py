@@ -199,14 +199,6 @@ def _pose_residuals(robot: Robot, qs, Ts, f: int, wp, wo) -> jax.Array:
     return jax.vmap(one)(qs, Ts)
 
 
-def _residuals_impl(robot, qs, Ts, theta, wp, wo, *, masks_key, f):
-    masks = {k: np.asarray(v) for k, v in masks_key}
-    return _pose_residuals(_apply(robot, masks, theta), qs, Ts, f, wp, wo)
-
-
-_residuals = robot_jit(_residuals_impl, ("masks_key", "f"))
-
-
 def _check_qs(robot: Robot, qs: Any, fn: str):
     """Configurations (M, dof), M >= 1, as the robot's dtype, and their non-finite guard."""
     refuse_multi_dof(robot, fn, "fits joint offsets and parameters of 1-dof joints only")
@@ -249,10 +241,11 @@ def _regressor_impl(robot, qs, theta0, wp, wo, *, masks_key, f):
             R, p = frame_pose(r, q, f)
             return p, R
 
-        return jax.vmap(one)(qs)
+        p, R = jax.vmap(one)(qs)
+        return (p, R), R
 
-    _, R0 = poses(theta0)
-    dP, dRt = jax.jacfwd(poses)(theta0)  # (M, 3, P), (M, 3, 3, P)
+    # The rotations at theta0 come out of the same forward-mode pass (its primal).
+    (dP, dRt), R0 = jax.jacfwd(poses, has_aux=True)(theta0)  # (M, 3, P), (M, 3, 3, P)
     dw = jax.vmap(
         lambda dRk, R: jax.vmap(lambda d: spatial.vee(d @ R.T), in_axes=2, out_axes=1)(dRk)
     )(dRt, R0)  # (M, 3, P)
@@ -300,7 +293,7 @@ def identifiability(
     A = _regressor(
         robot,
         qs,
-        jnp.zeros(len(names), robot.dtype),
+        np.zeros(len(names), robot.dtype),
         jnp.asarray(1.0 / position_sigma, robot.dtype),
         jnp.asarray(1.0 / orientation_sigma, robot.dtype),
         masks_key=_masks_key(masks),
@@ -431,6 +424,7 @@ def calibrate(
     dtype = robot.dtype
     wp = jnp.asarray(1.0 / position_sigma, dtype)
     wo = jnp.asarray(1.0 / orientation_sigma, dtype)
+    masks_key = _masks_key(masks)
     theta, hist, k, converged = _fit(
         robot,
         qs,
@@ -438,7 +432,7 @@ def calibrate(
         wp,
         wo,
         jnp.asarray(tol, dtype),
-        masks_key=_masks_key(masks),
+        masks_key=masks_key,
         f=f,
         optimizer=optimizer,
         max_steps=int(max_steps),
@@ -447,10 +441,11 @@ def calibrate(
     theta, hist = guard((theta, hist))
     if guard.bad is not False:
         converged = converged & ~guard.bad
-    before, after = _rms_errors(robot, qs, Ts, masks, f, theta)
-    std = _fit_std(robot, qs, Ts, masks, f, theta, wp, wo)
-    fitted = _apply(robot, masks, theta)
-    values, stds = _values_and_stds(fitted, masks, std, dtype)
+    # The regressor at the fit: the program identifiability compiled (theta is an argument).
+    A = _regressor(robot, qs, theta, wp, wo, masks_key=masks_key, f=f)
+    fitted, values, stds, before, after = _summary(
+        robot, qs, Ts, theta, A, wp, wo, masks_key=masks_key, f=f
+    )
     return CalibrationResult(
         robot=fitted,
         params=values,
@@ -510,29 +505,39 @@ def _check_identifiability(
     return identifiable
 
 
-def _rms_errors(robot: Robot, qs, Ts, masks: dict[str, np.ndarray], f: int, theta):
-    """``(before, after)``: each the RMS position and orientation errors (unweighted) with the
-    nominal parameters and with the correction ``theta``."""
-    masks_key = _masks_key(masks)
-    one = jnp.ones((), robot.dtype)
+def _summary_impl(robot, qs, Ts, theta, A, wp, wo, *, masks_key, f):
+    """The report of a fit, one program per robot, masks, frame and shapes (as the fit itself):
+    the fitted robot, the result's ``params`` and ``std`` dicts, and the RMS position and
+    orientation errors ``(before, after)`` with the nominal parameters and with the correction
+    ``theta``. ``A`` is the weighted regressor at ``theta`` (:func:`_regressor`)."""
+    masks = {k: np.asarray(v) for k, v in masks_key}
+    one = jnp.ones((), qs.dtype)
+    # The nominal robot itself, not moved by a zero correction: its constants fold.
+    r0 = _pose_residuals(robot, qs, Ts, f, one, one)
+    fitted = _apply(robot, masks, theta)
+    r = _pose_residuals(fitted, qs, Ts, f, one, one)
+    weights = jnp.concatenate([jnp.broadcast_to(wp, (3,)), jnp.broadcast_to(wo, (3,))])
+    std = _fit_std((r * weights[None, :]).reshape(-1), A)
+    values, stds = _values_and_stds(fitted, masks, std, qs.dtype)
+    return fitted, values, stds, _rms_errors(r0), _rms_errors(r)
 
-    def rms(th):
-        rr = _residuals(robot, qs, Ts, th, one, one, masks_key=masks_key, f=f)
-        return (
-            jnp.sqrt(jnp.mean(jnp.sum(rr[:, :3] ** 2, axis=1))),
-            jnp.sqrt(jnp.mean(jnp.sum(rr[:, 3:] ** 2, axis=1))),
-        )
 
-    return rms(jnp.zeros_like(theta)), rms(theta)
+_summary = robot_jit(_summary_impl, ("masks_key", "f"))
 
 
-def _fit_std(robot: Robot, qs, Ts, masks: dict[str, np.ndarray], f: int, theta, wp, wo):
-    """Predicted standard deviations (P,) of the free parameters: the square roots of the
-    diagonal of ``s^2 (A^T A)^-1``, A the weighted regressor at the fit."""
-    masks_key = _masks_key(masks)
-    r = _residuals(robot, qs, Ts, theta, wp, wo, masks_key=masks_key, f=f).reshape(-1)
-    A = _regressor(robot, qs, theta, wp, wo, masks_key=masks_key, f=f)
-    s2 = jnp.sum(r * r) / max(r.shape[0] - theta.shape[0], 1)
+def _rms_errors(r) -> tuple[jax.Array, jax.Array]:
+    """The RMS position and orientation errors of unweighted residuals ``r`` (M, 6)."""
+    return (
+        jnp.sqrt(jnp.mean(jnp.sum(r[:, :3] ** 2, axis=1))),
+        jnp.sqrt(jnp.mean(jnp.sum(r[:, 3:] ** 2, axis=1))),
+    )
+
+
+def _fit_std(r, A) -> jax.Array:
+    """Predicted standard deviations (P,) of the free parameters from the weighted residuals
+    ``r`` (6M,) and regressor ``A`` (6M, P) at the fit: the square roots of the diagonal of
+    ``s^2 (A^T A)^-1``."""
+    s2 = jnp.sum(r * r) / max(r.shape[0] - A.shape[1], 1)
     cov = s2 * jnp.linalg.pinv(A.T @ A, hermitian=True)
     return jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
 

@@ -247,6 +247,22 @@ def test_under_jit_nonfinite_data_do_not_converge():
         lambda q, T: jk.calibrate(robot, q, T, ["a"], check_identifiable=False),
         compiler_options=FAST_COMPILE,
     )
+    # The report of the fit (fitted robot, values, stds, RMS errors) is one compiled program,
+    # cached like the fit, not dozens of operations run (and compiled per shape) one by one: in
+    # the trace (which the call below reuses) each of those outputs comes straight out of it.
+    traced = fit.trace(jnp.asarray(qs), Ts)
+    eqns = traced.jaxpr.eqns
+    programs = [e.params["name"] for e in eqns if e.primitive.name in ("jit", "pjit")]
+    assert [p for p in programs if p != "_where"] == [
+        "_fit_impl", "_regressor_impl", "_summary_impl"
+    ], programs  # fmt: skip
+    summary = next(e for e in eqns if e.params.get("name") == "_summary_impl").outvars
+    out = jax.tree_util.tree_unflatten(
+        jax.tree_util.tree_structure(traced.out_info), traced.jaxpr.jaxpr.outvars
+    )
+    report = (out.robot, out.params, out.std, out.rms_position_before, out.rms_position_after,
+              out.rms_orientation_before, out.rms_orientation_after)  # fmt: skip
+    assert all(any(v is s for s in summary) for v in jax.tree_util.tree_leaves(report))
     good = fit(jnp.asarray(qs), Ts)
     assert bool(good.converged)
     np.testing.assert_allclose(np.asarray(good.params["a"]), np.asarray(robot.params["a"]) * 1.01,
