@@ -76,17 +76,23 @@ def _rand(tag: str, shape, dtype) -> np.ndarray:
     return rng.standard_normal(shape).astype(dtype)
 
 
-def _evaluate(functions: dict, others: dict, derivatives: tuple[str, ...]) -> dict:
+def _evaluate(
+    functions: dict, others: dict, derivatives: tuple[str, ...], values: dict | None = None
+) -> dict:
     """Values of ``functions`` (name -> (f, args), float outputs) and of ``others``, plus for
     each function the derivatives asked for: ``"grad"`` (a vector-Jacobian product per
     argument) and ``"jvp"`` (a Jacobian-vector product along random tangents).
 
     Both derivatives come from one ``jax.linearize`` of each function: its linear map is the
     jvp, and the map's transpose the vector-Jacobian product (what ``jax.grad`` of ``vdot(w, f)``
-    computes), so f is traced twice (value, linearisation) instead of three times."""
+    computes), so f is traced twice (value, linearisation) instead of three times. ``values``
+    (name -> value) holds the values of functions the caller already called with the same
+    arguments (for ``others`` from the same call): those are not traced again."""
     out = {}
+    values = values or {}
     for name, (f, args) in functions.items():
-        out[name] = y = f(*args)  # the value as called (an SVD without vectors, ...)
+        # the value as called (an SVD without vectors, ...)
+        out[name] = y = values[name] if name in values else f(*args)
         if not derivatives:
             continue
         f_jvp = jax.linearize(f, *args)[1]
@@ -181,6 +187,7 @@ def _matrix_kernel(J, v, qd0, F, *, derivatives=()):
     lam = jnp.asarray(DAMPING, J.dtype)
     fns = {}
     others = {}
+    values = {}  # of functions in fns, from the calls that give others their entries
     for rows in ROWS:
         t = _tag(rows)
         fns[f"singular_values/{t}"] = (lambda J, r=rows: jk.singular_values(J, r), (J,))
@@ -198,6 +205,8 @@ def _matrix_kernel(J, v, qd0, F, *, derivatives=()):
         others[f"rank/{t}"] = analysis.rank(J, rows, rtol=RANK_RTOL)
         others[f"near_singular/{t}"] = jk.near_singular(J, NEAR, rows=rows)
         ve, fe = jk.velocity_ellipsoid(J, rows), jk.force_ellipsoid(J, rows)
+        values[f"velocity_ellipsoid/radii/{t}"] = ve.radii
+        values[f"force_ellipsoid/radii/{t}"] = fe.radii
         others[f"velocity_ellipsoid/axes/{t}"] = ve.axes
         others[f"force_ellipsoid/axes/{t}"] = fe.axes
         # the ellipsoid without its (sign-ambiguous) basis: axes diag(radii^2) axes^T
@@ -231,7 +240,7 @@ def _matrix_kernel(J, v, qd0, F, *, derivatives=()):
         lambda J, v, s, lam: jk.null_space_velocity(J, v, s, damping=lam),
         (J, v, qd0, lam),
     )
-    return _evaluate(fns, others, derivatives)
+    return _evaluate(fns, others, derivatives, values)
 
 
 _matrix_single = jax.jit(_matrix_kernel, compiler_options=FAST_COMPILE)
@@ -491,19 +500,28 @@ _DECOUPLING_FLOATS = (
 )  # fmt: skip
 
 
+def _decoupling_floats(w) -> jax.Array:
+    return jnp.concatenate([jnp.ravel(getattr(w, k)) for k in _DECOUPLING_FLOATS])
+
+
 def _wrist_kernel(robot: jk.Robot, q, *, derivatives=()):
     def decoupling(q):
-        w = jk.wrist_decoupling(robot, q, 1e-6)
-        return jnp.concatenate([jnp.ravel(getattr(w, k)) for k in _DECOUPLING_FLOATS])
+        return _decoupling_floats(jk.wrist_decoupling(robot, q, 1e-6))
 
-    w = jk.wrist_decoupling(robot, q, 1e-6)
+    w = jk.wrist_decoupling(robot, q, 1e-6)  # one call for its floats and its flags
+    centre, distance = jk.wrist_centre(robot, q)
     fns = {
         "wrist_centre/centre": (lambda q: jk.wrist_centre(robot, q)[0], (q,)),
         "wrist_centre/distance": (lambda q: jk.wrist_centre(robot, q)[1], (q,)),
         "wrist_decoupling": (decoupling, (q,)),
     }
     others = {"arm_singular": w.arm_singular, "wrist_singular": w.wrist_singular}
-    return _evaluate(fns, others, derivatives)
+    values = {
+        "wrist_centre/centre": centre,
+        "wrist_centre/distance": distance,
+        "wrist_decoupling": _decoupling_floats(w),
+    }
+    return _evaluate(fns, others, derivatives, values)
 
 
 def test_wrist_functions_vmap_finite_and_float32():
