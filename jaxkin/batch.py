@@ -365,7 +365,11 @@ def chunked_scan(
     ``step(carry, *rows) -> (carry, outputs)`` is written for one row (as for ``lax.scan``):
     ``rows[i]`` is ``arrays[i][t]``; ``carry`` a pytree of arrays whose structure, shapes and
     dtypes ``step`` keeps. The sequence is cut into chunks as in :func:`chunked_map`, and
-    ``jax.jit`` of a ``lax.scan`` over one chunk is compiled once; each chunk starts from the
+    ``jax.jit`` of a ``lax.scan`` over one chunk is compiled once (and kept: a later call with the
+    same ``step``, carry and chunk shapes and dtypes reuses the program, as ``jax.jit`` does;
+    ``step`` is the key, by identity for a function, so a new ``lambda`` is compiled afresh,
+    and by value for a hashable value object: pass arrays that vary between calls in the
+    carry, not as constants it closes over); each chunk starts from the
     carry the previous one ended with, which stays on the device (the next chunk is dispatched
     before the previous one's outputs are copied out). The last chunk is padded by repeating its
     last row; padded rows leave the carry unchanged and their outputs are dropped, so the result
@@ -438,7 +442,43 @@ def _trace_scan(
 ) -> jax.stages.Traced:
     """Trace ``jit`` of a ``lax.scan`` of ``step`` over ``chunk`` rows, as a function of
     ``(carry, valid, *chunk arrays)``: rows at or past ``valid`` (padding) keep the carry.
-    ``.out_info``: ``(carry, outputs)`` shapes."""
+    ``.out_info``: ``(carry, outputs)`` shapes. The ``jax.jit`` object is kept per ``step``
+    (:func:`_scanned`), so that a later call with the same step, shapes and dtypes reuses JAX's
+    caches of the trace, the lowering and the executable."""
+    spec = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), carry)
+    specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype) for a in host]
+    return _scanned(step).trace(spec, jax.ShapeDtypeStruct((), np.int32), *specs)
+
+
+SCANNED_CACHE_SIZE = 8
+"""How many ``jax.jit`` objects of a chunk's scan :func:`_scanned` keeps (least recently used
+dropped first); each holds its step function (and what that closes over, e.g. a robot) and
+JAX's compiled executables for the shapes it was called with."""
+
+_scanned_cache: collections.OrderedDict = collections.OrderedDict()
+
+
+def _scanned(step: Callable[..., Any]) -> Any:
+    """``jax.jit`` of :func:`_scan_chunk` for ``step``: one object per ``step`` (at most
+    :data:`SCANNED_CACHE_SIZE`), a new one for an unhashable ``step``. Keyed by the step itself
+    (by value for a hashable value object such as :func:`jaxkin.motion.retarget`'s, else by
+    identity), as ``jax.jit``'s own cache is: a step whose behaviour depends on state it reads
+    when traced (not on its arguments) is not retraced when that state changes."""
+    try:
+        jitted = _scanned_cache.pop(step, None)
+    except TypeError:  # unhashable: no cache
+        return jax.jit(_scan_chunk(step))
+    if jitted is None:
+        jitted = jax.jit(_scan_chunk(step))
+    _scanned_cache[step] = jitted  # most recently used last
+    while len(_scanned_cache) > SCANNED_CACHE_SIZE:
+        _scanned_cache.popitem(last=False)
+    return jitted
+
+
+def _scan_chunk(step: Callable[..., Any]) -> Callable[..., Any]:
+    """``run(carry, valid, *xs)``: ``lax.scan`` of ``step`` over the rows of ``xs``; rows at or
+    past ``valid`` (padding) keep the carry."""
 
     def run(carry, valid, *xs):
         def body(state, row):
@@ -451,9 +491,7 @@ def _trace_scan(
         (carry, _), ys = jax.lax.scan(body, (carry, jnp.int32(0)), xs)
         return carry, ys
 
-    spec = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), carry)
-    specs = [jax.ShapeDtypeStruct((chunk, *a.shape[1:]), a.dtype) for a in host]
-    return jax.jit(run).trace(spec, jax.ShapeDtypeStruct((), np.int32), *specs)
+    return run
 
 
 def stream_map(

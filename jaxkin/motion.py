@@ -31,8 +31,10 @@ limit that the gradient pushes further are held, and a joint that a step would t
 limit is set on it while the other joints are solved again (they make up for it in the same
 step).
 
-Each step reports its residual ``|e|`` (recomputed with the exact rotation logarithm and an
-independent forward pass, as ``jk.solve_ik`` does), per-frame position and orientation errors,
+Each step reports its residual ``|e|`` (the frames' rows recomputed with the exact rotation
+logarithm and an independent forward pass, as ``jk.solve_ik`` does; the centre of mass is the
+one the iterations computed at the returned configuration, the same function of it, not
+computed twice), per-frame position and orientation errors,
 the iterations used, ``converged`` and a :class:`jaxkin.ik.RESULTS` code. A target with a NaN or
 inf entry is flagged, never passed off as a number: that step keeps ``q_{t-1}``, its residual is
 NaN and its code ``nonfinite``; the sequence goes on from ``q_{t-1}``. Targets are not checked
@@ -44,11 +46,16 @@ rigid transform does not converge and says so.
 the per-step results written to numpy arrays or to disk (an npz, CSV or a directory of ``.npy``
 files, chunk by chunk) with a progress bar; memory is bounded by the chunk, whatever the
 sequence's length (inputs may be ``np.memmap`` arrays). :func:`track_step` is one step (jitted,
-the kernel :func:`retarget` scans): ``retarget`` equals calling it in a loop.
+the kernel :func:`retarget` scans, traced once for both): ``retarget`` equals calling it in a
+loop. The scan is compiled once per robot (value), frames, centre-of-mass target or not,
+``iterations``, chunk length and dtype, and kept (``chunked_scan``'s cache): the targets,
+``q0``, weights, tolerances, damping, smoothness and posture are its arguments, so a later
+call that changes only those compiles nothing.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, NamedTuple
 
 import jax
@@ -147,16 +154,19 @@ class _Params(NamedTuple):
 
 # ----------------------------------------------------------------------------- kernel
 def _residual(robot: Robot, spec: _Spec, q, T, com, w):
-    """Weighted residual ``e`` (rows,) and Jacobian ``J`` (rows, nv), one forward pass."""
+    """Weighted residual ``e`` (rows,), Jacobian ``J`` (rows, nv) and the centre of mass ``c``
+    (3,) at ``q`` (zeros without a centre-of-mass target), one forward pass each for the
+    frames and for the centre of mass."""
     g = jacobians_pass(robot, q, spec.frames)
     Ts, Js = g.pose(), g.matrix()
     es = [pose_residual(Ts[i], T[i]) for i in range(len(spec.frames))]
     Jr = [Js.reshape(-1, robot.nv)]
+    c = jnp.zeros(3, Js.dtype)
     if spec.com:
         c, Jc = com_and_jacobian(robot, q)
         es.append(com - c)
         Jr.append(Jc)
-    return jnp.concatenate(es) * w, jnp.concatenate(Jr, axis=0) * w[:, None]
+    return jnp.concatenate(es) * w, jnp.concatenate(Jr, axis=0) * w[:, None], c
 
 
 def _scalar_entries(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
@@ -220,21 +230,23 @@ def _step_impl(robot: Robot, q_prev, T, com, params: _Params, *, spec: _Spec) ->
     vhi = jnp.where(scalar, hi[ix], jnp.inf)
 
     def evaluate(q):
-        e, J = _residual(robot, spec, q, T, com, w)
-        return e, J, jnp.sum(e * e)
+        e, J, c = _residual(robot, spec, q, T, com, w)
+        return e, J, jnp.sum(e * e), c
 
-    def cond(c):
-        err, it, stuck = c[3], c[5], c[7]
+    def cond(s):
+        err, it, stuck = s[3], s[5], s[7]
         return (it <= spec.iterations) & (err > tol2) & ~bad & ~stuck
 
-    def body(c):
+    def body(s):
         # evaluate the trial (q_prev itself first), keep it if better, and make the next trial:
-        # one forward pass per iteration
-        q, e, J, err, lam, it, trial, _ = c
-        et, Jt, errt = evaluate(trial)
+        # one forward pass per iteration. ``c`` is always the centre of mass at ``q`` (the
+        # first trial is ``q`` itself), for the report
+        q, e, J, err, lam, it, trial, _, c = s
+        et, Jt, errt, ct = evaluate(trial)
         better = errt < err
         pick = lambda a, b: jnp.where(better, a, b)  # noqa: E731
         q, e, J = pick(trial, q), pick(et, e), pick(Jt, J)
+        c = jnp.where(better | (it == 0), ct, c)
         stuck = ~better & (lam >= LAMBDA_MAX)
         lam = jnp.where(
             it == 0,
@@ -248,7 +260,7 @@ def _step_impl(robot: Robot, q_prev, T, com, params: _Params, *, spec: _Spec) ->
         dv0 = jnp.minimum(1.0, jnp.sqrt(err)) * pull
         dv = _limited_step(J, e, lam, q, dv0, ix, scalar, vlo, vhi)
         trial = jnp.clip(integrate_kernel(robot, q, dv), lo, hi)
-        return q, e, J, err, lam, it + 1, trial, stuck
+        return q, e, J, err, lam, it + 1, trial, stuck, c
 
     m = 6 * len(spec.frames) + 3 * spec.com
     inf = jnp.asarray(jnp.inf, dtype)
@@ -261,21 +273,22 @@ def _step_impl(robot: Robot, q_prev, T, com, params: _Params, *, spec: _Spec) ->
         jnp.int32(0),
         q_prev,
         jnp.zeros((), bool),
+        jnp.full(3, jnp.nan, dtype),  # the centre of mass at q: set by the first pass
     )
-    q, _, _, _, _, it, _, stuck = jax.lax.while_loop(cond, body, init)
+    q, _, _, _, _, it, _, stuck, c = jax.lax.while_loop(cond, body, init)
     it = jnp.maximum(it - 1, 0)  # the first pass evaluates q_prev
-    return _report(robot, spec, q, T, com, w, params.tol.astype(dtype), it, stuck, bad)
+    return _report(robot, spec, q, c, T, com, w, params.tol.astype(dtype), it, stuck, bad)
 
 
-def _report(robot, spec: _Spec, q, T, com, w, tol, it, stuck, bad) -> MotionResult:
-    """The step's errors, by an independent forward pass and the exact rotation logarithm; the
-    per-frame and centre-of-mass errors count the rows with a weight > 0 only (as
-    ``jk.solve_ik``'s)."""
+def _report(robot, spec: _Spec, q, c, T, com, w, tol, it, stuck, bad) -> MotionResult:
+    """The step's errors at ``q``: the frames' by an independent forward pass and the exact
+    rotation logarithm, the centre of mass' from ``c`` (the iterations' value at ``q``: the
+    same function of ``q``, computed once per program); the per-frame and centre-of-mass errors
+    count the rows with a weight > 0 only (as ``jk.solve_ik``'s)."""
     k = len(spec.frames)
     R, p = frame_poses(robot, q, spec.frames)
     es = [pose_error(spatial.make_transform(R[i], p[i]), T[i]) for i in range(k)]
     if spec.com:
-        c, _ = com_and_jacobian(robot, q)
         es.append(com - c)
     e = jnp.concatenate(es)
     on = jnp.where(w != 0, e, 0.0)  # the errors of the rows asked for (weight > 0)
@@ -353,10 +366,10 @@ def _params(
         raise JaxkinError(f"{fn}: tol and damping must be > 0, got {tol!r} and {damping!r}.")
     if not 0 <= smoothness <= 1:
         raise JaxkinError(f"{fn}: smoothness must lie in [0, 1], got {smoothness!r}.")
-    params = _Params(*(jnp.asarray(x, dtype) for x in (w, tol, damping, smoothness)))
+    params = _Params(*(_on_device(x, dtype) for x in (w, tol, damping, smoothness)))
     if posture is None:
         return params
-    q_ref = jnp.asarray(check_q(robot, posture, what="posture", fn=fn), dtype)
+    q_ref = _on_device(check_q(robot, posture, what="posture", fn=fn, host=True), dtype)
     pw = (
         DEFAULT_POSTURE_WEIGHT
         if posture_weight is None
@@ -364,7 +377,16 @@ def _params(
     )
     if not 0 <= pw <= 1:
         raise JaxkinError(f"{fn}: posture_weight must lie in [0, 1], got {posture_weight!r}.")
-    return params._replace(q_ref=q_ref, posture_weight=jnp.asarray(pw, dtype))
+    return params._replace(q_ref=q_ref, posture_weight=_on_device(pw, dtype))
+
+
+def _on_device(x: Any, dtype) -> jax.Array:
+    """``x`` as a JAX array of ``dtype``: host data put on the device (``jnp.asarray`` of host
+    data compiles a ``stage`` operation once per shape and dtype), a JAX array (or a tracer)
+    converted by JAX."""
+    if isinstance(x, jax.Array):
+        return jnp.asarray(x, dtype)
+    return jax.device_put(np.asarray(x, dtype))
 
 
 def _check_iterations(iterations: Any, fn: str) -> int:
@@ -422,6 +444,24 @@ def track_step(
         raise ShapeError(f"{fn}: com must have shape (3,), got {tuple(c.shape)}.")
     r = _step(robot, jnp.asarray(q_prev, dtype), T.reshape(k, 4, 4), c, params, spec=spec)
     return r if several else _one_frame(r)
+
+
+@dataclasses.dataclass(frozen=True)
+class _ScanStep:
+    """:func:`retarget`'s row of :func:`jaxkin.batch.chunked_scan`: ``(q, params), T[, c] ->
+    ((q', params), result)``, :func:`track_step`'s kernel (one trace for both). The settings
+    ride in the carry, unchanged, so that the step is a value (robot, spec, one frame or
+    several) and ``chunked_scan`` keeps one compiled scan per value, shapes and dtypes: a
+    later call with other targets, weights or tolerances compiles nothing."""
+
+    robot: Robot
+    spec: _Spec
+    several: bool
+
+    def __call__(self, carry, T, c=None):
+        q, params = carry
+        r = _step(self.robot, q, T.reshape(len(self.spec.frames), 4, 4), c, params, spec=self.spec)
+        return (r.q, params), (r if self.several else _one_frame(r))
 
 
 def _one_frame(r: MotionResult) -> MotionResult:
@@ -509,7 +549,7 @@ def retarget(
         robot, spec, weights, com_weight, tol, damping, smoothness, posture, posture_weight, fn
     )
     dtype = np.dtype(robot.dtype)
-    q0 = jnp.asarray(check_q(robot, q0, what="q0", fn=fn), dtype)
+    q0 = _on_device(check_q(robot, q0, what="q0", fn=fn, host=True), dtype)
     k = len(spec.frames)
     row = (k, 4, 4) if several else (4, 4)
     shape = tuple(getattr(T_targets, "shape", np.shape(T_targets)))
@@ -525,13 +565,9 @@ def retarget(
             raise ShapeError(f"{fn}: com must have shape ({shape[0]}, 3), got {cshape}.")
         inputs.append(com)
 
-    def step(q, T, c=None):
-        r = _step_impl(robot, q, T.reshape(k, 4, 4), c, params, spec=spec)
-        return r.q, (r if several else _one_frame(r))
-
     _, *results = chunked_scan(
-        step,
-        q0,
+        _ScanStep(robot, spec, several),
+        (q0, params),
         *inputs,
         chunk_size=chunk_size,
         progress=progress,

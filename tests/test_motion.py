@@ -12,6 +12,7 @@ LEGS run's chunk length, and one step) and the zoo's Panda (float64 and float32)
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import types
 
@@ -23,7 +24,7 @@ from _legs import FEET, LEGS
 from _xla import FAST_COMPILE
 
 import jaxkin as jk
-from jaxkin import motion
+from jaxkin import batch, motion
 from jaxkin.batch import chunked_scan
 from jaxkin.ik import RESULTS
 
@@ -143,6 +144,95 @@ def test_chunked_run_equals_the_unchunked_one_and_writes_to_disk(tmp_path):
         np.testing.assert_allclose(saved["position_error"], res.position_error, atol=1e-12)
 
 
+@contextlib.contextmanager
+def jax_compiles():
+    """The names of the JAX compile steps (trace, lowering, XLA compile) run inside the block."""
+    events = []
+
+    def listen(name, seconds, **kwargs):
+        if name.startswith("/jax/core/compile/"):
+            events.append(name)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        yield events
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+
+
+def test_a_later_call_with_other_targets_and_settings_compiles_nothing():
+    """The compiled scan is kept per robot, frames, iterations, chunk shape and dtype; targets,
+    q0, weights and tolerances are its arguments. The second chunk's steps run again from the
+    first chunk's last configuration equal the chunked run's, bit for bit."""
+    qs, _, frames, T, res = legs_case()
+    with jax_compiles() as events:
+        rest = motion.retarget(LEGS, T[CHUNK : 2 * CHUNK], res.q[CHUNK - 1], frames)
+        other = motion.retarget(
+            LEGS, T[:CHUNK], qs[0], frames, weights=np.full(6, 2.0), tol=1e-9, damping=1e-3
+        )
+    assert events == []
+    np.testing.assert_array_equal(rest.q, res.q[CHUNK : 2 * CHUNK])
+    np.testing.assert_array_equal(rest.iterations, res.iterations[CHUNK : 2 * CHUNK])
+    assert np.all(other.converged) and np.all(other.residual <= 1e-9), other.result
+
+
+PLANAR3 = jk.Robot.from_joints(
+    [
+        dict(
+            name=f"j{i}",
+            type="revolute",
+            child=f"link{i}",
+            xyz=[0.3 if i else 0.0, 0.0, 0.0],
+            axis=[0, 0, 1],
+            lower=-2.5,
+            upper=2.5,
+            inertial=dict(mass=1.0 + i, xyz=[0.15, 0.0, 0.0]),
+        )
+        for i in range(3)
+    ]
+    + [dict(name="tip", type="fixed", child="tip", xyz=[0.3, 0.0, 0.0])],
+    name="planar3",
+    dtype=np.float64,
+)
+"""Three links of 0.3 m in a plane, masses 1, 2 and 3 kg at their middles."""
+
+
+def planar3_com(q):
+    """The centre of mass of :data:`PLANAR3` in numpy (the oracle): link i's centre lies 0.15 m
+    along it, at the angle ``q_0 + ... + q_i``, from its joint."""
+    q = np.atleast_2d(q)
+    angle = np.cumsum(q, axis=1)
+    along = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n, 3, 2)
+    joints = np.concatenate([np.zeros_like(along[:, :1]), np.cumsum(0.3 * along, axis=1)], 1)
+    centres = joints[:, :3] + 0.15 * along
+    mass = np.array([1.0, 2.0, 3.0])
+    xy = np.einsum("l,nlk->nk", mass, centres) / mass.sum()
+    return np.concatenate([xy, np.zeros_like(xy[:, :1])], axis=1)
+
+
+def test_centre_of_mass_errors_are_those_of_the_returned_configurations():
+    """The tip's position held and the centre of mass pulled along x (4 rows, 3 joints: no
+    step converges), one iteration per step: each step reports the centre-of-mass error of the
+    configuration it returns (against the numpy oracle); a NaN target's step is flagged and
+    held."""
+    n = 6
+    q0 = np.array([0.3, 0.4, 0.5])
+    com = planar3_com(q0) + np.outer(np.linspace(0.0, 0.05, n), [1.0, 0.0, 0.0])
+    com[3, 1] = np.nan
+    T = np.broadcast_to(np.asarray(jk.fk(PLANAR3, q0, frame="tip")), (n, 4, 4))
+    w = [1.0, 1.0, 0.0, 0.0, 0.0, 0.0]
+    res = motion.retarget(
+        PLANAR3, T, q0, "tip", weights=w, com=com, com_weight=[1.0, 1.0, 0.0], iterations=1
+    )
+    ok = np.arange(n) != 3
+    want = np.linalg.norm((com - planar3_com(res.q))[:, :2], axis=1)  # x and y rows only
+    np.testing.assert_allclose(res.com_error[ok], want[ok], rtol=1e-12, atol=1e-15)
+    assert np.all(res.com_error[ok][1:] > 1e-3)  # unconverged: the errors are real numbers
+    assert np.all(res.result[ok][1:] == RESULTS.max_steps_reached)
+    assert np.isnan(res.com_error[3]) and res.result[3] == RESULTS.nonfinite
+    np.testing.assert_array_equal(res.q[3], res.q[2])
+
+
 # ----------------------------------------------------------------------------- an arm
 @functools.cache
 def panda(dtype):
@@ -223,3 +313,33 @@ def test_chunked_scan_equals_lax_scan_and_carries_across_padded_chunks():
     np.testing.assert_allclose(got["c"], want["c"], atol=1e-15)
     np.testing.assert_array_equal(got["x2"], 2 * xs)
     assert calls == [4, 4, 3]  # 11 rows: chunks of 4, 4 and 4 (one padded row)
+    init = jnp.float64(2.0)
+    with jax_compiles() as events:  # the same step, shapes and dtypes: the kept program
+        c2, again = chunked_scan(step, init, xs[::-1], ys, chunk_size=4)
+    assert events == []
+    want_c2, want2 = jax.lax.scan(lambda c, xy: step(c, *xy), init, (xs[::-1], ys))
+    assert float(c2) == pytest.approx(float(want_c2), abs=1e-15)
+    np.testing.assert_allclose(again["c"], want2["c"], atol=1e-15)
+
+
+def test_kept_scans_are_bounded():
+    """At most ``SCANNED_CACHE_SIZE`` compiled scans are kept, the least recently used dropped;
+    an unhashable step is compiled afresh, not kept."""
+
+    class Unhashable:
+        __hash__ = None
+
+        def __call__(self, c, x):
+            return c + x, c
+
+    batch._scanned_cache.clear()
+    steps = [lambda c, x, k=k: (c + k * x, c) for k in range(batch.SCANNED_CACHE_SIZE + 1)]
+    first = batch._scanned(steps[0])
+    assert batch._scanned(steps[0]) is first
+    for step in steps[1:]:
+        batch._scanned(step)
+    assert len(batch._scanned_cache) == batch.SCANNED_CACHE_SIZE
+    assert steps[0] not in batch._scanned_cache and steps[-1] in batch._scanned_cache
+    step = Unhashable()
+    assert batch._scanned(step) is not batch._scanned(step)
+    assert len(batch._scanned_cache) == batch.SCANNED_CACHE_SIZE
