@@ -1,9 +1,13 @@
 """Derivatives of the Jacobian: J-dot, J-dot qd and the kinematic Hessian, exact by autodiff.
 
-Every function here differentiates the Jacobian jaxkin already builds (the hand-built geometric
-Jacobian of :func:`jaxkin.geometric_jacobian`, or the analytical Jacobian of
-:func:`jaxkin.analytical_jacobian`) with ``jax.jvp`` / ``jax.jacfwd``: no finite differences, no
-second hand-written formula to keep in sync.
+Every function here differentiates the hand-built geometric Jacobian jaxkin already builds
+(:func:`jaxkin.geometric_jacobian`) with ``jax.jvp`` / ``jax.jacfwd``: no finite differences, no
+second hand-written formula to keep in sync. The analytical J-dot (:func:`analytical_jacobian_dot`)
+adds the representation's rate terms to that one ``jax.jvp``: with ``J_a = blkdiag(I, B^-1) J``
+(``B = B(phi)`` the rate matrix of :mod:`jaxkin.representations`), its orientation rows are
+``B^-1 (Jdot_w - Bdot B^-1 J_w)``, ``Bdot`` the ``jax.jvp`` of the closed-form ``B`` along
+``phi_dot``: the derivative of :func:`jaxkin.analytical_jacobian`, without differentiating the
+representation map (atan2, log) twice.
 
 Definitions (``J(q)`` the (6, dof) Jacobian of ``frame`` at ``point`` in ``reference``):
 
@@ -41,11 +45,17 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_point, check_q, check_reference, check_v, result_dtype
-from ._jacobian_pass import analytical_jacobian_pass, jacobian_pass
+from ._jacobian_pass import jacobian_pass
 from ._jit import eager
 from .configuration import integrate_kernel
 from .model import Robot
-from .representations import check_representation, guard_singular
+from .representations import (
+    check_representation,
+    from_matrix,
+    guard_singular,
+    rate_matrix,
+    representation_margin,
+)
 
 __all__ = [
     "analytical_jacobian_dot",
@@ -235,7 +245,9 @@ def analytical_jacobian_dot(
     ``J_a = d[p; phi]/dq`` as in :func:`jaxkin.analytical_jacobian` (``p`` the frame origin or
     ``point`` in world coordinates, ``phi`` the orientation in ``representation``: ``"rpy"``,
     ``"zyz"`` or ``"rotvec"``); rows ``[dp; dphi]``. ``d/dt [p; phi] = J_a qd`` and
-    ``d2/dt2 [p; phi] = J_a qdd + Jdot_a qd``.
+    ``d2/dt2 [p; phi] = J_a qdd + Jdot_a qd``. Exact: one ``jax.jvp`` of the hand-built
+    Jacobian along ``qd``, and for the orientation rows ``B^-1 (Jdot_w - Bdot B^-1 J_w)`` (``B``
+    the rate matrix at ``phi``, see :func:`jaxkin.rate_matrix`).
 
     Representation singularities are handled as in :func:`jaxkin.analytical_jacobian`: eagerly,
     a margin below ``singular_tol`` raises :class:`~jaxkin.RepresentationSingularityError`; under
@@ -275,23 +287,61 @@ def analytical_jacobian_dot_qd(
     return _singular_guard(acc, margin, representation, singular_tol, return_margin, robot, q, qd)
 
 
-def _analytical_dot_kernel(robot, q, frame, qd, point, representation):
-    def Ja(qq):
-        return analytical_jacobian_pass(robot, qq, frame, point, representation)
+def _inverse3(B: jax.Array) -> jax.Array:
+    """The inverse of a (3, 3) matrix by its adjugate (rows ``b2 x b3``, ``b3 x b1``, ``b1 x b2``
+    of its columns ``b_i``, over the determinant): elementwise operations only, cheap to compile
+    and to differentiate again; inf/NaN where ``B`` is singular (the margin says where)."""
+    b1, b2, b3 = B[:, 0], B[:, 1], B[:, 2]
+    adj = jnp.stack([jnp.cross(b2, b3), jnp.cross(b3, b1), jnp.cross(b1, b2)])
+    return adj / jnp.sum(b1 * adj[0])
 
-    g, x0 = _tangent(robot, q, Ja)
-    (_, margin), (Jad, _) = jax.jvp(g, (x0,), (qd,))
-    return Jad, margin
+
+def _times(M: jax.Array, X: jax.Array) -> jax.Array:
+    """``M @ X`` for a (3, 3) ``M`` and a (3,) or (3, n) ``X``, elementwise (no small dot)."""
+    if X.ndim == 1:
+        return jnp.sum(M * X[None, :], axis=1)
+    return jnp.sum(M[:, :, None] * X[None, :, :], axis=1)
+
+
+def _rate_terms(R: jax.Array, w: jax.Array, wd: jax.Array, qd: jax.Array, representation: str):
+    """The orientation rows of the analytical J-dot (or J-dot qd), with their margin.
+
+    With ``phi`` the representation of ``R``, ``B = B(phi)`` its rate matrix
+    (``omega = B phi_dot``) and ``w``, ``wd`` the angular rows of the geometric Jacobian and of
+    its time derivative (or of ``J qd`` and ``Jdot qd``): the analytical rows are
+    ``w_a = B^-1 w`` (what ``jk.analytical_jacobian`` computes by the chain rule through the
+    representation map), and differentiating ``B w_a = w`` along ``q(t)`` gives
+    ``d/dt w_a = B^-1 (wd - Bdot w_a)``, ``Bdot = dB/dphi . phi_dot``, ``phi_dot = w_a qd``
+    (``= w_a`` itself for ``J qd``). The same derivative as differentiating the chain rule's
+    ``jacfwd`` of the representation map, without its second derivatives."""
+    phi = from_matrix(R, representation)
+    Binv = _inverse3(rate_matrix(phi, representation))
+    wa = _times(Binv, w)
+    phid = wa if wa.ndim == 1 else wa @ qd
+    Bd = jax.jvp(lambda p: rate_matrix(p, representation), (phi,), (phid,))[1]
+    return _times(Binv, wd - _times(Bd, wa)), representation_margin(phi, representation)
+
+
+def _analytical_dot_kernel(robot, q, frame, qd, point, representation):
+    def J(qq):
+        g = jacobian_pass(robot, qq, frame, point, "world_aligned")
+        return g.matrix(), g.rotation()
+
+    g, x0 = _tangent(robot, q, J)
+    (Jg, R), (Jd, _) = jax.jvp(g, (x0,), (qd,))
+    rows, margin = _rate_terms(R, Jg[3:], Jd[3:], qd, representation)
+    return jnp.concatenate([Jd[:3], rows], axis=0), margin
 
 
 def _analytical_dot_qd_kernel(robot, q, frame, qd, point, representation):
-    def xd(qq):
-        Ja, margin = analytical_jacobian_pass(robot, qq, frame, point, representation)
-        return Ja @ qd, margin
+    def V(qq):
+        g = jacobian_pass(robot, qq, frame, point, "world_aligned")
+        return g.times(qd), g.rotation()
 
-    g, x0 = _tangent(robot, q, xd)
-    (_, margin), (acc, _) = jax.jvp(g, (x0,), (qd,))
-    return acc, margin
+    g, x0 = _tangent(robot, q, V)
+    (v, R), (a, _) = jax.jvp(g, (x0,), (qd,))
+    rows, margin = _rate_terms(R, v[3:], a[3:], qd, representation)
+    return jnp.concatenate([a[:3], rows]), margin
 
 
 _jacobian_dot = eager(_jacobian_dot_kernel, ("frame", "reference"))

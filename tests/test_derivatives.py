@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _xla import FAST_COMPILE
+from _xla import FAST_COMPILE, jaxpr_eqns
 
 import jaxkin as jk
 
@@ -306,3 +306,23 @@ def test_errors_name_shapes_and_fix():
         jk.jacobian_dot(robot, np.zeros(6), np.zeros(6), reference="body")
     with pytest.raises(jk.JaxkinError, match="representation"):
         jk.analytical_jacobian_dot(robot, np.zeros(6), np.zeros(6), "xyz")
+
+
+def test_analytical_jacobian_dot_costs_no_second_derivative_of_the_representation():
+    """The analytical J-dot is traced as the geometric J-dot plus the representation's rate
+    terms (``B(phi)^-1 (Jdot_w - Bdot J_a,w)``), not as a derivative of the chain rule through
+    ``jacfwd`` of the representation map (a second derivative of atan2 / log: about twice the
+    equations, and twice again under ``jax.grad``). Structure, not the clock: at most as many
+    equations as the geometric J-dot and the analytical Jacobian together."""
+    robot = jk.robots.load("two_link_planar", dtype=np.float64)
+    q, qd = jnp.array([0.2, 0.3]), jnp.array([0.5, -1.0])
+
+    def eqns(fn, *args):
+        return len(jaxpr_eqns(fn, *args))
+
+    jdot = eqns(lambda q, qd: jk.jacobian_dot(robot, q, qd), q, qd)
+    for rep in REPRESENTATIONS:
+        budget = jdot + eqns(lambda q, r=rep: jk.analytical_jacobian(robot, q, r), q)
+        for fn in (jk.analytical_jacobian_dot, jk.analytical_jacobian_dot_qd):
+            n = eqns(lambda q, qd, f=fn, r=rep: f(robot, q, qd, r, return_margin=True), q, qd)
+            assert n <= budget, (fn.__name__, rep, n, budget)
