@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 import jax
+import numpy as np
 
 
 def is_tracer(x: Any) -> bool:
@@ -30,3 +31,13 @@ def inside_trace() -> bool:
         return not core.trace_state_clean()
     except Exception:  # pragma: no cover - private API moved: assume nested
         return True
+
+
+def staged() -> bool:
+    """True while the caller's computation is staged out for compilation (inside its ``jit``,
+    ``make_jaxpr``, a ``scan`` or ``cond`` body, at any depth of ``vmap``/``jvp``/``grad``): an
+    operation on constants then gives a tracer. False outside any trace and under an eager
+    ``vmap``/``jvp``/``grad``, whose operations run one by one. :func:`jaxkin.solve_ik` traces
+    its solve inline when staged (a nested jit under ``jvp`` would be traced a second time for
+    its tangents) and keeps its own compiled solver otherwise."""
+    return inside_trace() and is_traced(jax.lax.add(np.int32(0), np.int32(0)))

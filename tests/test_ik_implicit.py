@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
-from _xla import FAST_COMPILE, jaxpr_counts, sampler
+from _xla import FAST_COMPILE, jaxpr_counts, jaxpr_eqns, sampler
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -458,23 +458,52 @@ def test_a_derivative_traces_the_loops_once(monkeypatch):
     reuses the loops' answer instead of tracing the solve a second time (a whole-body build
     spent a third of its tracing there). Tracing only, no compile; a robot of this test's own
     (no cached trace)."""
-    rows = [dict(a=0.4, alpha=0.0, d=0.0, theta=0.0, joint="revolute", lower=-3, upper=3)] * 2
-    arm = jk.Robot.from_dh(rows, name="traced_once", dtype=np.float64)
+    arm, T = _two_link("traced_once")
     calls = []
     queue = jk.ik._lm_queue
     monkeypatch.setattr(jk.ik, "_lm_queue", lambda *a, **k: calls.append(1) or queue(*a, **k))
-    T = np.eye(4)  # fk at q = (0.3, -0.5), written out (no kernel compiled)
-    c, s = np.cos(-0.2), np.sin(-0.2)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:2, 3] = 0.4 * np.array([np.cos(0.3) + c, np.sin(0.3) + s])
 
     def q_of(T):
         return jk.solve_ik(arm, T, jnp.zeros(2), num_seeds=1, throw=False).q
 
-    jax.make_jaxpr(lambda T: jax.jvp(q_of, (T,), (T,)))(T)
+    jaxpr = jax.make_jaxpr(lambda T: jax.jvp(q_of, (T,), (T,)))(T)
     assert len(calls) == 1
+    # inside the caller's trace the solve is traced inline: a nested jit of it would be traced
+    # again by jvp for its tangents (every operation of the loops a second time)
+    assert not [e for e in jaxpr.jaxpr.eqns if e.params.get("name") == "_solve_batch_impl"]
     jax.make_jaxpr(jax.grad(lambda T: jnp.sum(q_of(T))))(np.stack([T, T]))  # a new shape
     assert len(calls) == 2
+
+
+def _two_link(name: str):
+    """A planar two-link DH arm of its own name (no cached trace) and the pose of its tip at
+    q = (0.3, -0.5), written out (no kernel compiled)."""
+    rows = [dict(a=0.4, alpha=0.0, d=0.0, theta=0.0, joint="revolute", lower=-3, upper=3)] * 2
+    arm = jk.Robot.from_dh(rows, name=name, dtype=np.float64)
+    T = np.eye(4)
+    c, s = np.cos(-0.2), np.sin(-0.2)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = 0.4 * np.array([np.cos(0.3) + c, np.sin(0.3) + s])
+    return arm, T
+
+
+def test_a_robot_gradient_sums_the_targets_once_per_leaf():
+    """The gradient with respect to a traced robot over a batch of targets sums the targets'
+    cotangents once per leaf of the robot, not once per scalar that the kinematics reads (97
+    sums of two targets for this arm, each of which XLA fused with its own copy of the pass: a
+    UR5's gradient over 8 targets compiled in 10.2 s instead of 5.8). Tracing only."""
+    arm, T = _two_link("summed_per_leaf")
+
+    def loss(robot):
+        sol = jk.solve_ik(robot, np.stack([T, T]), jnp.zeros(2), num_seeds=1, throw=False)
+        return jnp.sum(sol.q)
+
+    sums = [
+        (e.invars[0].aval.shape, e.outvars[0].aval.shape)
+        for e in jaxpr_eqns(jax.grad(loss), arm)
+        if e.primitive.name == "reduce_sum"
+    ]
+    assert sums.count(((2,), ())) < 20, sums
 
 
 # ----------------------------------------------------------------------------- the rank test
