@@ -167,33 +167,50 @@ class FrameJacobian(NamedTuple):
     robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's pose
     (``R``, origin ``p``, world coordinates) from the same forward pass.
 
+    ``Jv``, ``Jw``: the columns (with ``below``, those of ``cv``, ``cw`` plus ``below``'s,
+    rotated: scalars formed when read); ``below`` (:class:`_Below`, or None): columns computed
+    below a free-flyer, rotated into ``world_aligned`` or ``world`` at assembly.
     ``matrix()`` (6, dof), ``times(qd)`` = ``J @ qd`` (6,) without forming J, ``rotation()``
     (3, 3), ``pose()`` (4, 4) ``T_world_frame``."""
 
-    Jv: Any
-    Jw: Any
+    cv: Any
+    cw: Any
     R: Any
     p: Any
     dtype: Any
+    below: Any = None
+
+    @property
+    def Jv(self) -> Any:
+        return self.columns()[0]
+
+    @property
+    def Jw(self) -> Any:
+        return self.columns()[1]
+
+    def columns(self) -> tuple[Any, Any]:
+        """``(Jv, Jw)``, the rotated columns from below the free-flyer formed once."""
+        if self.below is None:
+            return self.cv, self.cw
+        Kv, Kw = _rotated(self.below)
+        add = lambda J, K: [fold.vadd(a, b) for a, b in zip(J, K, strict=True)]  # noqa: E731
+        return add(self.cv, Kv), add(self.cw, Kw)
 
     def matrix(self) -> jax.Array:
+        if self.below is not None:
+            return _assemble_below(self.cv, self.cw, self.below, self.dtype)
         if isinstance(self.Jv, list):
             return _assemble(self.Jv, self.Jw, self.dtype)
         return jnp.concatenate([self.Jv, self.Jw], axis=0)
 
     def times(self, qd: jax.Array) -> jax.Array:
         """``J @ qd`` (6,) without materialising J when the columns are scalars."""
-        if not isinstance(self.Jv, list):
+        Jv, Jw = self.columns()
+        if not isinstance(Jv, list):
             return self.matrix() @ qd
-        qs = [qd[k] for k in range(len(self.Jv))]
-        v = [
-            fold.add(*(fold.mul(c[i], s) for c, s in zip(self.Jv, qs, strict=True)))
-            for i in range(3)
-        ]
-        w = [
-            fold.add(*(fold.mul(c[i], s) for c, s in zip(self.Jw, qs, strict=True)))
-            for i in range(3)
-        ]
+        qs = [qd[k] for k in range(len(Jv))]
+        v = [fold.add(*(fold.mul(c[i], s) for c, s in zip(Jv, qs, strict=True))) for i in range(3)]
+        w = [fold.add(*(fold.mul(c[i], s) for c, s in zip(Jw, qs, strict=True))) for i in range(3)]
         return fold.stack_matrix(v + w, self.dtype)
 
     def rotation(self) -> jax.Array:
@@ -263,7 +280,7 @@ def _unrolled_jacobian(
     if root is None:
         Jv, Jw = _columns(robot, sp, target, frame)
         Jv, Jw = _world_to(reference, Jv, Jw, R, target)
-        return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
+        return FrameJacobian(cv=Jv, cw=Jw, R=R, p=p, dtype=sp.dtype)
     path = robot.ancestors(frame)
     below = {j for j in path if j >= root - 1 and root - 1 in robot.ancestors(j + 1)}
     above = {j for j in path if j not in below}
@@ -273,14 +290,99 @@ def _unrolled_jacobian(
     target_r = pr if pt is None else fold.vadd(pr, fold.matvec(Rr, ptv))
     Kv, Kw = _columns(robot, rp, target_r, frame, below)
     if reference == "local":
+        # the relative rotation has a deep closure: XLA keeps each entry in a buffer anyway
         Kv, Kw = _rotate(fold.transpose(Rr), Kv, Kw)
     else:
-        Kv, Kw = _rotate(sp.R[root], Kv, Kw)
-        if reference == "world":
-            Kv = [fold.vadd(v, fold.cross(target, w)) for v, w in zip(Kv, Kw, strict=True)]
+        K = _Below(sp.R[root], Kv, Kw, target if reference == "world" else None)
+        if not any(_shared_column(Jv, Jw, K, k) for k in range(len(Jv))):
+            return FrameJacobian(cv=Jv, cw=Jw, R=R, p=p, dtype=sp.dtype, below=K)
+        Kv, Kw = _rotated(K)
     Jv = [fold.vadd(a, b) for a, b in zip(Jv, Kv, strict=True)]
     Jw = [fold.vadd(a, b) for a, b in zip(Jw, Kw, strict=True)]
-    return FrameJacobian(Jv=Jv, Jw=Jw, R=R, p=p, dtype=sp.dtype)
+    return FrameJacobian(cv=Jv, cw=Jw, R=R, p=p, dtype=sp.dtype)
+
+
+class _Below(NamedTuple):
+    """Columns computed below a free-flyer (``Kv``, ``Kw``: scalar 3-vectors in its child's
+    axes), in world axes ``M @ column`` (``M``: that child's rotation), then for ``reference=
+    "world"`` the linear part moved to the world origin (``target``: the point's world
+    position; else None)."""
+
+    M: Any
+    Kv: list
+    Kw: list
+    target: Any
+
+
+def _rotated(K: _Below) -> tuple[list, list]:
+    """``K``'s columns in world axes, as scalars (zero columns stay constant zeros)."""
+    Kv, Kw = _rotate(K.M, K.Kv, K.Kw)
+    if K.target is not None:
+        Kv = [fold.vadd(v, fold.cross(K.target, w)) for v, w in zip(Kv, Kw, strict=True)]
+    return Kv, Kw
+
+
+def _shared_column(Jv: list, Jw: list, K: _Below, k: int) -> bool:
+    """Whether column ``k`` has terms from above and from below the free-flyer (a velocity
+    entry shared by joints on both sides: a mimic joint)."""
+    return not _is_zero_column(Jv, Jw, k) and not _is_zero_column(K.Kv, K.Kw, k)
+
+
+def _assemble_below(Jv: list, Jw: list, K: _Below, dtype) -> jax.Array:
+    """(6, nv) from the scalar columns ``Jv``, ``Jw`` and ``K``'s (no column has both).
+
+    ``K``'s nonzero columns are stacked per entry (six (m,) arrays) and each run of them that
+    is contiguous in J is rotated as rows: an entry of ``K.M`` multiplies a whole row (one
+    broadcast), so it is read by a few operations and XLA fuses the rotation into the output.
+    Rotated column by column as scalars, every entry of ``K.M`` was read by each of the (up to
+    2 m) rotated vectors, and XLA's CPU compiler, which duplicates an operation into at most
+    15 index paths (``FusionNodeIndexingEvaluation``), kept each in a buffer of its own: one
+    small fusion each, and a compile of each (a Talos hand, world-aligned: 36 fusions, 505
+    multiplies; now 14 and 396; the stacked columns are buffers instead). The same operations
+    in the same order: the scalar columns' values (op by op bit for bit, up to the sign of
+    zeros; compiled within a few ulps: FMA contraction)."""
+    nv = len(Jv)
+    below = [k for k in range(nv) if not _is_zero_column(K.Kv, K.Kw, k)]
+    if not below:
+        return _assemble(Jv, Jw, dtype)
+    stack = lambda xs: fold.stack_vector(xs, dtype)  # noqa: E731
+    kv = tuple(stack([K.Kv[k][i] for k in below]) for i in range(3))
+    kw = tuple(stack([K.Kw[k][i] for k in below]) for i in range(3))
+
+    def rows(a: int, b: int) -> jax.Array:  # columns a..b-1 of kv, kw in world axes: (6, b - a)
+        rv = fold.matvec(K.M, tuple(x[a:b] for x in kv))
+        rw = fold.matvec(K.M, tuple(x[a:b] for x in kw))
+        if K.target is not None:
+            rv = fold.vadd(rv, fold.cross(K.target, rw))
+        ones = jnp.ones((b - a,), dtype)
+        return jnp.stack([x * ones if fold.is_const(x) else x.astype(dtype) for x in (*rv, *rw)])
+
+    at = {k: i for i, k in enumerate(below)}  # column k of J is entry at[k] of kv, kw
+
+    def kind(k: int) -> str:
+        return "below" if k in at else ("zero" if _is_zero_column(Jv, Jw, k) else "above")
+
+    pieces = []
+    start = 0
+    for end in range(1, nv + 1):
+        same = end < nv and kind(end) == kind(start)
+        if kind(start) == "below":
+            same = same and at[end] == at[end - 1] + 1
+        elif kind(start) == "above":
+            same = same and end - start < fold.CONCAT_OPERANDS
+        if same:
+            continue
+        if kind(start) == "zero":
+            pieces.append(jnp.zeros((6, end - start), dtype))
+        elif kind(start) == "below":
+            pieces.append(rows(at[start], at[end - 1] + 1))
+        else:
+            cols = range(start, end)
+            entries = [[Jv[k][i] for k in cols] for i in range(3)]
+            entries += [[Jw[k][i] for k in cols] for i in range(3)]
+            pieces.append(fold.stack_matrix(entries, dtype))
+        start = end
+    return _concatenate(pieces, axis=1)
 
 
 def _is_zero(c) -> bool:
@@ -428,7 +530,7 @@ def scan_jacobian_pass(
     elif reference == "world":
         Jv = fold.vadd(Jv, fold.cross(target, Jw))
     st = lambda x: fold.stack_matrix(x, dtype)  # noqa: E731
-    return FrameJacobian(Jv=st(Jv), Jw=st(Jw), R=st(R), p=st(p), dtype=dtype)
+    return FrameJacobian(cv=st(Jv), cw=st(Jw), R=st(R), p=st(p), dtype=dtype)
 
 
 def _by_kind(rev: np.ndarray, pri: np.ndarray | None, if_rev, if_pri):
