@@ -15,6 +15,8 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax import lax
 
 Scalar = Any  # float | jax.Array (0-d)
 Vec = tuple  # (Scalar, Scalar, Scalar)
@@ -23,6 +25,38 @@ Mat = tuple  # ((Scalar,) * 3,) * 3
 
 def is_const(x: Scalar) -> bool:
     return isinstance(x, float)
+
+
+def _concrete(x: Scalar) -> bool:
+    """A strongly typed floating JAX array outside any trace: run op by op
+    (``jax.disable_jit()``)."""
+    return (
+        isinstance(x, jax.Array)
+        and not isinstance(x, jax.core.Tracer)
+        and not x.weak_type
+        and x.dtype.kind in "fc"
+    )
+
+
+def _alike(a: Scalar, b: Scalar) -> bool:
+    """Both concrete, of one dtype and shape: ``lax`` takes them as they are."""
+    return _concrete(a) and _concrete(b) and a.dtype == b.dtype and a.shape == b.shape
+
+
+# Op by op, ``jnp``'s operators promote their arguments (and a Python constant through one
+# more dispatch, a conversion) before the primitive runs: for operands already alike, ``lax``
+# runs the same primitive on them directly, about a third less time per operation (the same
+# values). Traced operands keep ``jnp``'s operators, so compiled programs are unchanged.
+def _times(a: Scalar, b: Scalar) -> Scalar:
+    if is_const(b) and _concrete(a):
+        return lax.mul(a, np.asarray(b, a.dtype))
+    return lax.mul(a, b) if _alike(a, b) else a * b
+
+
+def _plus(a: Scalar, b: Scalar) -> Scalar:
+    if is_const(b) and _concrete(a):
+        return lax.add(a, np.asarray(b, a.dtype))
+    return lax.add(a, b) if _alike(a, b) else a + b
 
 
 def mul(a: Scalar, b: Scalar) -> Scalar:
@@ -36,8 +70,8 @@ def mul(a: Scalar, b: Scalar) -> Scalar:
         if b == 1.0:
             return a
         if b == -1.0:
-            return -a
-    return a * b
+            return neg(a)
+    return _times(a, b)
 
 
 def add(*terms: Scalar) -> Scalar:
@@ -52,22 +86,22 @@ def add(*terms: Scalar) -> Scalar:
         return const
     out = traced[0]
     for t in traced[1:]:
-        out = out + t
-    return out + const if const != 0.0 else out
+        out = _plus(out, t)
+    return _plus(out, const) if const != 0.0 else out
 
 
 def neg(a: Scalar) -> Scalar:
-    return -a
+    return lax.neg(a) if _concrete(a) else -a
 
 
 def sub(a: Scalar, b: Scalar) -> Scalar:
     if is_const(b) and b == 0.0:
         return a
     if is_const(a) and a == 0.0:
-        return -b
+        return neg(b)
     if is_const(a) and is_const(b):
         return a - b
-    return a - b
+    return lax.sub(a, b) if _alike(a, b) else a - b
 
 
 def dot3(u: Vec, v: Vec) -> Scalar:
