@@ -34,8 +34,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_inertia, check_q, no_inertia_error
-from ._forward import forward_pass
+from . import _fold as fold
+from ._checks import check_inertia, check_q, is_traced, no_inertia_error
+from ._forward import forward_pass, scalar_pass, scan_joints
 from ._jit import eager
 from .model import Robot
 
@@ -100,10 +101,14 @@ def com_kernel(robot: Robot, q: jax.Array) -> jax.Array:
 
 def com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
     """``(c, Jc)``: the centre of mass (3,) and its Jacobian (3, nv) of a checked ``q``, from
-    one forward pass; nothing is checked but ``robot.has_inertia`` (static), so solvers call it
-    inside their loops (after :func:`check_inertia`). NaN for a total mass of 0."""
+    one forward pass (below a floating base, one relative to it: see
+    :func:`_unrolled_com_and_jacobian`); nothing is checked but ``robot.has_inertia`` (static),
+    so solvers call it inside their loops (after :func:`check_inertia`). NaN for a total mass
+    of 0."""
     if not robot.has_inertia:
         raise no_inertia_error(robot, "com_and_jacobian")
+    if scan_joints(robot) is None:
+        return _unrolled_com_and_jacobian(robot, q)
     fp = forward_pass(robot, q)
     dtype = fp.p.dtype
     m, c = _frame_centres(robot, fp)
@@ -124,6 +129,139 @@ def com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
     for j in robot.multi_dof_joints:
         Jc = _multi_dof_columns(robot, fp, j, M[j + 1], S[j + 1], Jc)
     return S[0] / total, Jc.T / total
+
+
+def _unrolled_com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """:func:`com_and_jacobian` as scalars with the model's constants folded (every path
+    unrolled): one pass over the tree accumulates each frame's subtree mass ``M`` and
+    mass-weighted centre ``S`` from the leaves up, and each joint's column is read from its
+    child's ``M``, ``S``.
+
+    Below a free joint (the outermost on a path: a floating base) the poses, sums and columns
+    are computed relative to its child frame (:func:`~jaxkin._forward.scalar_pass` with
+    ``root``), where the constants fold, and rotated into world axes once, by one (3, 3) product
+    per floating base. In world coordinates every pose below a free-flyer is a full product
+    with its rotation, and the program was about twice as long and slow to compile."""
+    n_frames = robot.n_frames
+    roots = _free_roots(robot)
+    group = [_group(robot, f, roots) for f in range(n_frames)]  # None: world coordinates
+    outside = tuple(f for f in range(n_frames) if group[f] is None)
+    passes = {None: scalar_pass(robot, q, frames=outside + roots, materialise_trig=True)}
+    for r in roots:
+        below = tuple(f for f in range(n_frames) if group[f] == r)
+        passes[r] = scalar_pass(robot, q, frames=below, root=r, materialise_trig=True)
+    sp = passes[None]
+    dtype = sp.dtype
+    m, com, mult = _mass_constants(robot, dtype)
+    M: list = [None] * n_frames
+    S: list = [None] * n_frames
+    for f in range(n_frames):
+        g = passes[group[f]]
+        c = fold.vadd(g.p[f], fold.matvec(g.R[f], com[f]))
+        M[f], S[f] = m[f], fold.vscale(c, m[f])
+    for f in range(n_frames - 1, 0, -1):  # children come after their parents
+        parent = _parent_frame(robot, f)
+        Sf = S[f]
+        if group[f] is not None and group[parent] != group[f]:  # a root: to world coordinates
+            Sf = fold.vadd(fold.vscale(sp.p[f], M[f]), fold.matvec(sp.R[f], Sf))
+        M[parent] = fold.add(M[parent], M[f])
+        S[parent] = fold.vadd(S[parent], Sf)
+    cols = {r: [(0.0, 0.0, 0.0)] * robot.nv for r in (None, *roots)}
+    for j, kind in enumerate(robot.kinds):
+        if kind == "fixed":
+            continue
+        r = group[j + 1]
+        _add_columns(robot, passes[r], j, M[j + 1], S[j + 1], mult[j], cols[r])
+    parts = [_stacked(cols[None], dtype)]
+    for r in roots:  # columns below a floating base: rotated into world axes
+        parts.append(fold.stack_matrix(sp.R[r], dtype) @ _stacked(cols[r], dtype))
+    total = fold.materialize(M[0], dtype)
+    return fold.stack_vector(S[0], dtype) / total, functools.reduce(jnp.add, parts) / total
+
+
+def _free_roots(robot: Robot) -> tuple[int, ...]:
+    """The child frames of the free joints with no free joint above them (floating bases)."""
+    free = [j for j, kind in enumerate(robot.kinds) if kind == "free"]
+    return tuple(j + 1 for j in free if not set(robot.ancestors(j + 1)[:-1]) & set(free))
+
+
+def _group(robot: Robot, frame: int, roots: tuple[int, ...]) -> int | None:
+    """The floating base (root frame) ``frame`` hangs from, itself included, or None."""
+    path = robot.ancestors(frame)
+    return next((r for r in roots if r - 1 in path), None)
+
+
+def _parent_frame(robot: Robot, frame: int) -> int:
+    if robot.has_tool and frame == robot.n_joints + 1:
+        return robot.n_joints
+    return robot.parents[frame - 1]
+
+
+def _mass_constants(robot: Robot, dtype) -> tuple[list, list, list]:
+    """Per frame the mass and the centre in the frame's axes, per joint the multiplier, as
+    scalars: Python floats (folded) for a concrete robot, JAX scalars for a traced one."""
+    if is_traced(robot):
+        m = jnp.asarray(robot.frame_mass).astype(dtype)
+        com = jnp.asarray(robot.frame_com).astype(dtype)
+        mult = jnp.asarray(robot.multiplier).astype(dtype)
+        n_frames = robot.n_frames
+        return (
+            [m[f] for f in range(n_frames)],
+            [tuple(com[f, i] for i in range(3)) for f in range(n_frames)],
+            [mult[j] for j in range(robot.n_joints)],
+        )
+    m = np.asarray(robot.frame_mass, dtype=np.float64)
+    com = np.asarray(robot.frame_com, dtype=np.float64)
+    mult = np.asarray(robot.multiplier, dtype=np.float64)
+    return (
+        [float(x) for x in m],
+        [tuple(float(x) for x in row) for row in com],
+        [float(x) for x in mult],
+    )
+
+
+def _add_columns(robot: Robot, sp, j: int, M, S, mult, cols: list) -> None:
+    """Adds joint ``j``'s columns (times the mass ``M`` its subtree holds; ``S``: the subtree's
+    mass-weighted centres, in the coordinates of ``sp``) to ``cols`` (per velocity entry)."""
+    kind, vi = robot.kinds[j], robot.v_index[j]
+    if kind in ("revolute", "prismatic"):
+        z = sp.z[j]
+        if kind == "revolute":
+            col = _cross(z, fold.vsub(S, fold.vscale(sp.o[j], M)))
+        else:
+            col = fold.vscale(z, M)
+        cols[vi] = fold.vadd(cols[vi], fold.vscale(col, mult))
+        return
+    R, c = sp.R[j + 1], sp.p[j + 1]
+    axes = [tuple(R[i][k] for i in range(3)) for k in range(3)]  # the child's axes
+    arm = fold.vsub(S, fold.vscale(c, M))
+    linear = {"free": (0, 1, 2), "ball": (), "planar": (0, 1)}[kind]
+    angular = {"free": (0, 1, 2), "ball": (0, 1, 2), "planar": (2,)}[kind]
+    new = [fold.vscale(axes[k], M) for k in linear] + [_cross(axes[k], arm) for k in angular]
+    for k, col in enumerate(new):
+        cols[vi + k] = fold.vadd(cols[vi + k], col)
+
+
+def _cross(u: tuple, v: tuple) -> tuple:
+    """``u x v`` of scalar 3-vectors, constants folded, but ``0 - x`` kept a subtraction (not
+    ``-x``): a zero entry is +0.0, as the array product gives it (a column printed as ``-0.0``
+    otherwise)."""
+
+    def sub(a, b):
+        return fold.sub(a, b) if fold.is_const(b) or not fold.is_const(a) else a - b
+
+    return (
+        sub(fold.mul(u[1], v[2]), fold.mul(u[2], v[1])),
+        sub(fold.mul(u[2], v[0]), fold.mul(u[0], v[2])),
+        sub(fold.mul(u[0], v[1]), fold.mul(u[1], v[0])),
+    )
+
+
+def _stacked(cols: list, dtype) -> jax.Array:
+    """(3, nv) from per-column scalar 3-vectors."""
+    if not cols:
+        return jnp.zeros((3, 0), dtype)
+    return jnp.stack([fold.stack_vector([c[i] for c in cols], dtype) for i in range(3)])
 
 
 def _frame_centres(robot: Robot, fp) -> tuple[jax.Array, jax.Array]:

@@ -444,3 +444,43 @@ def test_a_long_chain_through_the_scanned_pass():
         ahead, behind = jk.center_of_mass(robot, q + h * e), jk.center_of_mass(robot, q - h * e)
         fd = (np.asarray(ahead) - np.asarray(behind)) / (2 * h)
         np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-8)
+
+
+# ----------------------------------------------------------------------------- the kernel
+TWO_BODIES = """<mujoco model="two"><worldbody>
+<body name="a" pos="0 0 1"><freejoint name="fa"/><geom type="box" size=".2 .1 .3"/>
+  <body name="a1" pos=".2 .1 0" euler="10 0 20"><joint name="ha" axis="0 1 0"/>
+    <geom type="capsule" fromto="0 0 0 0 0 -.3" size=".04"/></body></body>
+<body name="b" pos="1 0 1"><freejoint name="fb"/><geom type="sphere" size=".1"/>
+  <body name="b1" pos="0 .2 0"><joint name="hb" axis="1 0 0"/>
+    <geom type="cylinder" fromto="0 0 0 0 .3 0" size=".03"/></body></body>
+<body name="post" pos="1 1 0"><geom type="sphere" size=".2"/></body>
+</worldbody></mujoco>"""
+
+
+def test_kernel_folds_below_each_floating_base_and_takes_a_traced_robot():
+    """Two floating bases (each one pass relative to it, rotated once), the robot's constants
+    folded or traced (``jit`` over the robot), against MuJoCo."""
+    mujoco = pytest.importorskip("mujoco")
+    from jaxkin.com import com_and_jacobian
+
+    robot = jk.load_mjcf(TWO_BODIES, dtype=np.float64)
+    m = mujoco.MjModel.from_xml_string(TWO_BODIES)
+    d = mujoco.MjData(m)
+    q = jnp.asarray(random_q(robot, 1, seed=7)[0])
+    program = jax.jit(lambda q: com_and_jacobian(robot, q)).lower(q).as_text()
+    assert "scatter" not in program  # columns and subtree sums as folded scalars, not scattered
+
+    def both(traced, q):  # one program: the robot's constants folded, and traced
+        return com_and_jacobian(robot, q), com_and_jacobian(traced, q)
+
+    d.qpos[:] = q
+    mujoco.mj_forward(m, d)
+    jac = np.zeros((3, m.nv))
+    mujoco.mj_jacSubtreeCom(m, d, jac, 0)
+    for jnt in np.nonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE)[0]:
+        v, body = m.jnt_dofadr[jnt], m.jnt_bodyid[jnt]  # qvel: world axes; v: body axes
+        jac[:, v : v + 3] = jac[:, v : v + 3] @ d.xmat[body].reshape(3, 3)
+    for c, J in jax.jit(both, compiler_options=FAST_COMPILE)(robot, q):
+        np.testing.assert_allclose(c, d.subtree_com[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(J, jac, rtol=0, atol=1e-12)
