@@ -18,6 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ._traces import is_tracer
+
 Scalar = Any  # float | jax.Array (0-d)
 Vec = tuple  # (Scalar, Scalar, Scalar)
 Mat = tuple  # ((Scalar,) * 3,) * 3
@@ -31,10 +33,7 @@ def _concrete(x: Scalar) -> bool:
     """A strongly typed floating JAX array outside any trace: run op by op
     (``jax.disable_jit()``)."""
     return (
-        isinstance(x, jax.Array)
-        and not isinstance(x, jax.core.Tracer)
-        and not x.weak_type
-        and x.dtype.kind in "fc"
+        isinstance(x, jax.Array) and not is_tracer(x) and not x.weak_type and x.dtype.kind in "fc"
     )
 
 
