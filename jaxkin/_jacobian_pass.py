@@ -154,12 +154,17 @@ def _assemble(Jv: list, Jw: list, dtype) -> jax.Array:
         if zero[start]:
             pieces.append(jnp.zeros((6, end - start), dtype))
         else:
-            cols = range(start, end)
-            rows = [[Jv[k][i] for k in cols] for i in range(3)]
-            rows += [[Jw[k][i] for k in cols] for i in range(3)]
-            pieces.append(fold.stack_matrix(rows, dtype))
+            pieces.append(_stacked_columns(Jv, Jw, start, end, dtype))
         start = end
     return _concatenate(pieces, axis=1)
+
+
+def _stacked_columns(Jv: list, Jw: list, start: int, end: int, dtype) -> jax.Array:
+    """(6, end - start): the scalar columns ``start..end-1`` of ``Jv``, ``Jw`` stacked."""
+    cols = range(start, end)
+    rows = [[Jv[k][i] for k in cols] for i in range(3)]
+    rows += [[Jw[k][i] for k in cols] for i in range(3)]
+    return fold.stack_matrix(rows, dtype)
 
 
 class FrameJacobian(NamedTuple):
@@ -377,10 +382,7 @@ def _assemble_below(Jv: list, Jw: list, K: _Below, dtype) -> jax.Array:
         elif kind(start) == "below":
             pieces.append(rows(at[start], at[end - 1] + 1))
         else:
-            cols = range(start, end)
-            entries = [[Jv[k][i] for k in cols] for i in range(3)]
-            entries += [[Jw[k][i] for k in cols] for i in range(3)]
-            pieces.append(fold.stack_matrix(entries, dtype))
+            pieces.append(_stacked_columns(Jv, Jw, start, end, dtype))
         start = end
     return _concatenate(pieces, axis=1)
 
