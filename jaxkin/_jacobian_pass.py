@@ -172,9 +172,9 @@ class FrameJacobian(NamedTuple):
     robots, constants folded) or as (3, dof) arrays (scanned chains), plus the frame's pose
     (``R``, origin ``p``, world coordinates) from the same forward pass.
 
-    ``Jv``, ``Jw``: the columns (with ``below``, those of ``cv``, ``cw`` plus ``below``'s,
-    rotated: scalars formed when read); ``below`` (:class:`_Below`, or None): columns computed
-    below a free-flyer, rotated into ``world_aligned`` or ``world`` at assembly.
+    ``cv``, ``cw``: the columns, except those computed below a free-flyer when ``below``
+    (:class:`_Below`, or None) holds them, rotated into ``world_aligned`` or ``world`` at
+    assembly; ``columns()`` gives all of them as ``(Jv, Jw)`` (the rotation traced once per call).
     ``matrix()`` (6, dof), ``times(qd)`` = ``J @ qd`` (6,) without forming J, ``rotation()``
     (3, 3), ``pose()`` (4, 4) ``T_world_frame``."""
 
@@ -184,14 +184,6 @@ class FrameJacobian(NamedTuple):
     p: Any
     dtype: Any
     below: Any = None
-
-    @property
-    def Jv(self) -> Any:
-        return self.columns()[0]
-
-    @property
-    def Jw(self) -> Any:
-        return self.columns()[1]
 
     def columns(self) -> tuple[Any, Any]:
         """``(Jv, Jw)``, the rotated columns from below the free-flyer formed once."""
@@ -204,9 +196,9 @@ class FrameJacobian(NamedTuple):
     def matrix(self) -> jax.Array:
         if self.below is not None:
             return _assemble_below(self.cv, self.cw, self.below, self.dtype)
-        if isinstance(self.Jv, list):
-            return _assemble(self.Jv, self.Jw, self.dtype)
-        return jnp.concatenate([self.Jv, self.Jw], axis=0)
+        if isinstance(self.cv, list):
+            return _assemble(self.cv, self.cw, self.dtype)
+        return jnp.concatenate([self.cv, self.cw], axis=0)
 
     def times(self, qd: jax.Array) -> jax.Array:
         """``J @ qd`` (6,) without materialising J when the columns are scalars."""
