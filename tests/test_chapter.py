@@ -17,7 +17,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import sympy as sp
 from _xla import FAST_COMPILE
 from hypothesis import given
 from hypothesis import strategies as st
@@ -134,6 +133,8 @@ def _pq2_jacobian(t1, d2, d3, t4, t5, d1, d6):
 
 
 def test_practice_question_2_closed_form_matches_sympy():
+    import sympy as sp  # here, not at module level: each xdist worker imports every test module
+
     syms = sp.symbols("t1 d2 d3 t4 t5 t6 d1 d6")
     t1, d2, d3, t4, t5, t6, d1, d6 = syms
     pos = sp.Matrix(_pq2_position(t1, d2, d3, t4, t5, d1, d6, c=sp.cos, s=sp.sin))

@@ -14,10 +14,11 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from _oracle_modules import lazy_module
 
 import jaxkin as jk
 
-viser = pytest.importorskip("viser", reason="the viewer extra: pip install 'jaxkin[viewer]'")
+viser = lazy_module("viser", reason="the viewer extra: pip install 'jaxkin[viewer]'")
 import jaxkin.viewer as jview  # noqa: E402
 
 Q = np.array([0.1, -0.4, 0.2, -1.9, 0.3, 1.6, 0.5])
