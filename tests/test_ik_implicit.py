@@ -18,14 +18,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.linalg
+from _oracle_modules import lazy_module
 from _xla import FAST_COMPILE, jaxpr_counts, jaxpr_eqns, sampler
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
 import jaxkin as jk
 from jaxkin.ik_gradients import full_rank
+
+# SciPy (matrix exponential, rotation vectors): imported by the first test that uses it
+scipy_linalg = lazy_module("scipy.linalg")
+scipy_transform = lazy_module("scipy.spatial.transform")
 
 B = 300  # every call of a solver: one batch shape, one compile
 H = 1e-5
@@ -60,7 +63,7 @@ GENERATORS = np.stack([_hat(e) for e in np.eye(6)])  # (6, 4, 4), [v; omega]
 @functools.cache
 def _steps(h: float) -> np.ndarray:
     """``expm(h X_j)`` (6, 4, 4) for the six generators (scipy), computed once per step."""
-    return np.stack([scipy.linalg.expm(h * X) for X in GENERATORS])
+    return np.stack([scipy_linalg.expm(h * X) for X in GENERATORS])
 
 
 class _Solver:
@@ -226,7 +229,7 @@ def _held_newton(robot, T_goal, q, k):
         e = np.concatenate(
             [
                 T_goal[:3, 3] - Tq[:3, 3],
-                Rotation.from_matrix(T_goal[:3, :3] @ Tq[:3, :3].T).as_rotvec(),
+                scipy_transform.Rotation.from_matrix(T_goal[:3, :3] @ Tq[:3, :3].T).as_rotvec(),
             ]
         )
         if np.max(np.abs(e)) <= 1e-14:

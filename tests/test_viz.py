@@ -5,19 +5,24 @@ import pathlib
 import shutil
 import sys
 
-import matplotlib
-
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from _oracle_modules import lazy_module
 
 import jaxkin as jk
 import jaxkin.viz as jv
 
 LOOK = pathlib.Path("/tmp/jaxkin_figures")
 NIRYO_Q = np.array([0.3, -0.6, 0.4, 0.5, -0.8, 0.3])
+plt = lazy_module("matplotlib.pyplot")  # imported by this file's first test, not at collection
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _agg_backend():
+    """Figures drawn off screen (before pyplot is first imported)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
 
 
 @pytest.fixture
