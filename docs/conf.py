@@ -44,6 +44,9 @@ napoleon_numpy_docstring = False
 autodoc_default_options = {"members": True, "member-order": "bysource"}
 autodoc_typehints = "signature"
 autodoc_preserve_defaults = True
+# Signatures come from annotations; jaxkin has no "# type: (...) -> ..." comments, which autodoc
+# would otherwise look for by reading and parsing each function's source again.
+autodoc_use_type_comments = False
 
 # Strict: every cross-reference must resolve (run with -W). Types from other libraries are not
 # documented here (the build has no network for intersphinx), so only they are exempt.

@@ -17,6 +17,7 @@ compilation cache's, as in tests/conftest.py, and SyntaxWarning, as in pyproject
 from __future__ import annotations
 
 import doctest
+import functools
 import importlib
 import json
 import pkgutil
@@ -54,11 +55,13 @@ def _module_names() -> list[str]:
     return sorted(names)
 
 
-def _doctests(name: str) -> list[doctest.DocTest]:
+@functools.cache
+def _doctests(name: str) -> tuple[doctest.DocTest, ...]:
     """The docstrings with examples among what module ``name`` defines (the finder leaves out
-    names a module imports: they are tested at home)."""
+    names a module imports: they are tested at home). Searched once per module: collection and
+    :func:`test_number_of_examples` read the same."""
     module = importlib.import_module(name)
-    return [t for t in doctest.DocTestFinder().find(module, name) if t.examples]
+    return tuple(t for t in doctest.DocTestFinder().find(module, name) if t.examples)
 
 
 MODULES = _module_names()
