@@ -107,13 +107,36 @@ def test_chunked_map_compiles_once_for_any_number_of_chunks():
 
 
 # --- long chains -------------------------------------------------------------------------------
+def _every_entry_point(robot):
+    """Functions ``(q, qd) -> [outputs]`` that together call every kinematics entry point (fk,
+    geometric Jacobians of two frames in every reference, twist, analytical Jacobian): three
+    programs, not one (XLA compiles the three in about three quarters of the time)."""
+
+    def jacobians(frame):
+        point = [0.1, -0.2, 0.3]
+        return lambda q, qd: [
+            jk.geometric_jacobian(robot, q, frame=frame, point=point, reference=ref)
+            for ref in jk.jacobians.REFERENCES
+        ]
+
+    def the_rest(q, qd):
+        return [
+            jk.fk_all(robot, q),
+            jk.fk(robot, q, frame="link7"),
+            jk.twist(robot, q, qd),
+            jk.analytical_jacobian(robot, q, "zyz", return_margin=True)[0],
+        ]
+
+    return [the_rest, jacobians(None), jacobians("link7")]
+
+
 @pytest.mark.parametrize("convention", ["standard", "modified"])
 def test_scan_path_equals_unrolled_path(convention, monkeypatch):
     """An 8-joint chain whose placements do not fold is scanned by default (SCAN_MIN_UNFOLDED;
     and a 36-joint one by its length: test_long_chain_program_size_does_not_grow_with_length);
-    lifting both thresholds unrolls it: the two passes agree. Each pass is traced afresh, in one
-    program (eager calls would reuse the executables cached for the first pass: the robot is the
-    same value, so the unrolled pass would never run)."""
+    lifting both thresholds unrolls it: the two passes agree. Each pass is traced afresh, in
+    three programs (:func:`_every_entry_point`; eager calls would reuse the executables cached
+    for the first pass: the robot is the same value, so the unrolled pass would never run)."""
     robot = _chain(8, seed=3, convention=convention)
     assert kinematics.uses_scan(robot)
     q = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, robot.dof))
@@ -124,22 +147,10 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", joints)
         monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", unfolded)
         assert kinematics.uses_scan(robot) == (joints == defaults[0])
-        every = fast(
-            lambda q, qd: [
-                jk.fk_all(robot, q),
-                jk.fk(robot, q, frame="link7"),
-                *[
-                    jk.geometric_jacobian(robot, q, frame=f, point=[0.1, -0.2, 0.3], reference=ref)
-                    for f in (None, "link7")
-                    for ref in jk.jacobians.REFERENCES
-                ],
-                jk.twist(robot, q, qd),
-                jk.analytical_jacobian(robot, q, "zyz", return_margin=True)[0],
-            ]
-        )
-        scans = str(every.trace(q, qd).jaxpr).count(" scan[")
+        programs = [fast(every) for every in _every_entry_point(robot)]
+        scans = sum(str(p.trace(q, qd).jaxpr).count(" scan[") for p in programs)
         assert (scans > 0) == (joints == defaults[0]), scans  # the pass asked for was traced
-        outs.append(every(q, qd))
+        outs.append([out for p in programs for out in p(q, qd)])
     for a, b in zip(*outs, strict=True):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
 
