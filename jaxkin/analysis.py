@@ -139,7 +139,22 @@ def _guarded(
     idx = _row_indices(rows, Jc.shape[0], fn)
     guard = finite_guard(fn, J=Jc, **others)
     Jc = guard.clean(Jc)
-    return (Jc if idx is None else Jc[jnp.array(idx)]), guard
+    return (Jc if idx is None else _take_rows(Jc, idx)), guard
+
+
+def _take_rows(J: jax.Array, idx: tuple[int, ...]) -> jax.Array:
+    """Rows ``idx`` of ``J`` as static slices, one per run of consecutive indices: a gather, and
+    under differentiation its scatter-add transpose, compile to far more code than slices and
+    their pads. The rows are the same copies; a backward pass that goes on past ``J`` (to q)
+    may round in the last bit differently, as XLA drops the rows it knows are zero."""
+    runs = [[idx[0], idx[0] + 1]]
+    for i in idx[1:]:
+        if i == runs[-1][1]:
+            runs[-1][1] += 1
+        else:
+            runs.append([i, i + 1])
+    parts = [jax.lax.slice_in_dim(J, a, b, axis=0) for a, b in runs]
+    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
 
 
 def _check_measure(measure: str, fn: str) -> str:
@@ -405,7 +420,7 @@ def manipulability_gradient(
 def _manipulability_gradient_kernel(robot, q, frame, point, measure, idx, reference):
     def m(qq):
         J = jacobian_pass(robot, qq, frame, point, reference).matrix()
-        return _manipulability(J if idx is None else J[jnp.array(idx)], measure)
+        return _manipulability(J if idx is None else _take_rows(J, idx), measure)
 
     return jax.grad(m)(q)
 

@@ -211,6 +211,34 @@ def test_measures_rank_and_near_singular_flag():
     assert float(out["square"]) == 1.0
 
 
+@jax.jit(compiler_options=FAST_COMPILE)
+def _scattered_rows(J):
+    """Rows given out of order and in separate runs (selected as slices joined together), and
+    the same rows taken out first."""
+    rows, Jr = (4, 0, 1, 5), J[jnp.array([4, 0, 1, 5])]
+    return {
+        "s": (jk.singular_values(J, rows), jk.singular_values(Jr)),
+        "grad": (
+            jax.grad(lambda J: jk.manipulability(J, rows=rows))(J),
+            jax.grad(jk.manipulability)(Jr),
+        ),
+        "dep": (jk.dependent_columns(J, rows).nullity, jk.dependent_columns(Jr).nullity),
+    }
+
+
+def test_rows_in_any_order_select_those_rows():
+    J = np.random.default_rng(3).normal(size=(6, 5))
+    J[4] = 2.0 * J[0]  # rank 3 in the selected rows
+    out = jax.tree_util.tree_map(np.asarray, _scattered_rows(J))
+    s, s_ref = out["s"]
+    np.testing.assert_array_equal(s, s_ref)
+    np.testing.assert_allclose(s, np.linalg.svd(J[[4, 0, 1, 5]], compute_uv=False), atol=1e-14)
+    assert tuple(out["dep"]) == (2, 2)
+    g, g_ref = out["grad"]
+    np.testing.assert_array_equal(g[[2, 3]], 0.0)  # rows not selected
+    np.testing.assert_allclose(g[[4, 0, 1, 5]], g_ref, rtol=0, atol=1e-15)
+
+
 def test_velocity_and_force_ellipsoids():
     robot = jk.robots.load("puma560", dtype=np.float64)
     q = jnp.array([0.1, 0.7, -0.4, 0.3, 0.6, -0.2])

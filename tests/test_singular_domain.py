@@ -264,12 +264,14 @@ def _jacobian_batch(name: str, dtype):
     jacobians = jax.jit(
         jax.vmap(lambda q: jk.geometric_jacobian(robot, q)), compiler_options=FAST_COMPILE
     )
-    Js = jacobians(jnp.asarray(qs, dtype))
-    Js = jnp.concatenate([Js, jnp.zeros_like(Js[:1])])
+    # assembled on the host and put on the device as they are (op by op, the concatenation and
+    # each jnp.asarray cast compiled a program)
+    Js = np.asarray(jacobians(jax.device_put(qs.astype(dtype))))
+    Js = np.concatenate([Js, np.zeros_like(Js[:1])])
     n, m, dof = Js.shape
-    v, qd0, F = (jnp.asarray(_rand(t, s, np.float64), dtype)
+    v, qd0, F = (_rand(t, s, np.float64).astype(dtype)
                  for t, s in (("v", (n, m)), ("qd0", (n, dof)), ("F", (n, m))))  # fmt: skip
-    return Js, v, qd0, F
+    return jax.device_put((Js, v, qd0, F))
 
 
 @pytest.fixture(scope="module", params=["two_link_planar", "ur5"])
@@ -424,7 +426,8 @@ _ROBOT_CHECKS = {
 def _robot_inputs(name: str, dtype):
     robot = jk.robots.load(name, dtype=dtype)
     qs = PLANAR_QS if name == "two_link_planar" else UR5_QS
-    return robot, jnp.asarray(qs, dtype), jnp.asarray(_rand("qd", qs.shape, np.float64), dtype)
+    qd = _rand("qd", qs.shape, np.float64)
+    return robot, *jax.device_put((qs.astype(dtype), qd.astype(dtype)))
 
 
 @pytest.fixture(scope="module", params=["two_link_planar", "ur5"])
@@ -538,9 +541,8 @@ def test_wrist_functions_vmap_finite_and_float32():
 
     robot32 = jk.robots.load("cylindrical_spherical_wrist", dtype=np.float32)
     batched32 = jax.vmap(functools.partial(_wrist_kernel, robot32))
-    out32 = _np(
-        jax.jit(batched32, compiler_options=FAST_COMPILE)(jnp.asarray(WRIST_QS, np.float32))
-    )
+    q32 = jax.device_put(WRIST_QS.astype(np.float32))  # a cast on the device compiles
+    out32 = _np(jax.jit(batched32, compiler_options=FAST_COMPILE)(q32))
     _assert_float32(out32)
     _assert_finite(out32, slice(None))
     np.testing.assert_array_equal(out32["arm_singular"], out["arm_singular"])
@@ -583,7 +585,7 @@ def _pose_pairs(dtype):
     turns = [np.zeros(3), [PI, 0.0, 0.0], PI * axis, [0.5, 0.1, -0.3]]
     Tb = np.stack([T @ _transform(_rot(w), 0.1 * i * axis) for i, w in enumerate(turns)])
     Ta = np.broadcast_to(T, Tb.shape)
-    return jnp.asarray(Ta, dtype), jnp.asarray(Tb, dtype)
+    return jax.device_put((Ta.astype(dtype), Tb.astype(dtype)))  # a cast on the device compiles
 
 
 def _pose_kernel(T, Td, *, derivatives=()):
@@ -651,7 +653,7 @@ def test_resolved_rate_control_vmap_gradient_and_float32():
     assert all(np.all(np.isfinite(g)) for g in grads)
 
     robot32 = jk.robots.load("two_link_planar", dtype=np.float32)
-    q32 = jnp.asarray(PLANAR_QS, np.float32)
+    q32 = jax.device_put(PLANAR_QS.astype(np.float32))
     run32 = jax.jit(jax.vmap(lambda q0, Ts: _rrc(robot32, q0, Ts)), compiler_options=FAST_COMPILE)
     out32 = _np(run32(q32, _rrc_paths(robot32, q32)))
     _assert_float32(out32)
@@ -664,7 +666,8 @@ def test_resolved_rate_control_vmap_gradient_and_float32():
 # ----------------------------------------------------------------------------- calibration
 def test_calibrate_float32_reduces_the_error():
     nominal = jk.robots.load("two_link_planar", a1=1.0, a2=0.7, dtype=np.float32)
-    true = nominal.replace(params={**nominal.params, "a": jnp.array([1.013, 0.688], np.float32)})
+    a_true = jax.device_put(np.array([1.013, 0.688], np.float32))
+    true = nominal.replace(params={**nominal.params, "a": a_true})
     qs = np.random.default_rng(4).uniform(-PI, PI, size=(30, 2)).astype(np.float32)
     Ts = jax.jit(jax.vmap(lambda q: jk.fk(true, q)), compiler_options=FAST_COMPILE)(jnp.asarray(qs))
     assert Ts.dtype == np.float32
