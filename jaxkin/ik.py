@@ -778,14 +778,16 @@ def _finish_task(robot, task: _Task, goal: _Goals, q, steps, seed, hit_max, unre
     """:func:`_finish` of a whole-body target, checked by an independent forward kinematics
     (the kernel of ``jk.fk``, not the solver's Jacobian pass) and the exact
     rotation logarithm: per frame the position and orientation errors of the rows with a
-    nonzero weight (k,), the centre of mass's, and the residual ``|w * e|`` over all rows."""
+    nonzero weight (k,), the centre of mass's, and the residual ``|w * e|`` over all rows.
+    The centre of mass is the one of the Jacobian pass that flags singular rows (the same
+    function of ``q``, traced once)."""
     k = len(task.frames)
     w = goal.w
     R, p = frame_poses(robot, q, task.frames)
     es = [pose_error(spatial.make_transform(R[i], p[i]), goal.T[i]) for i in range(k)]
+    _, c, J = _task_pass(robot, task, q)
     com_error = None
     if task.com:
-        c, _ = com_and_jacobian(robot, q)
         es.append(goal.com - c)
     e = jnp.concatenate(es)
     on = w != 0
@@ -797,7 +799,7 @@ def _finish_task(robot, task: _Task, goal: _Goals, q, steps, seed, hit_max, unre
     residual = safe_norm(w * e)
     converged = residual <= tol
     code = _result_code(converged, residual, unreachable, hit_max)
-    _, J = _task_residual(robot, task, q, goal)
+    J = J * w[:, None]
     held = _held_v(q, _v_limits(robot, q.dtype))
     return IKSolution(
         q=q,

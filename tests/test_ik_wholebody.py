@@ -279,3 +279,40 @@ def _fk_tangents(qs, dqs):
         return jax.jvp(lambda q: jk.fk(LEGS, q, frame=FEET), (q,), (dq,))[1]
 
     return jax.vmap(one)(qs, dqs)
+
+
+def test_the_report_reuses_the_centre_of_mass_of_its_jacobian_pass(monkeypatch):
+    """A solve with ``com=`` traces ``com_and_jacobian`` twice: in the loop's step and in the
+    report, whose centre of mass (``com_error``) comes from the same pass as the Jacobian that
+    flags singular rows (a second trace of it made every whole-body program larger). Tracing
+    only, no compile; a small robot of this test's own (no cached trace)."""
+    robot = jk.Robot.from_joints(
+        [
+            dict(name="root", type="free", child="body", inertial=dict(mass=2.0)),
+            dict(
+                name="hinge",
+                type="revolute",
+                parent="body",
+                child="arm",
+                axis=[0, 1, 0],
+                lower=-2.0,
+                upper=2.0,
+                inertial=dict(mass=1.0, xyz=[0.3, 0, 0]),
+            ),
+            dict(name="tip", type="fixed", child="tip", xyz=[0.6, 0, 0]),
+        ],
+        name="com_traced_once",
+    )
+    calls = []
+    com_and_jacobian = jk.ik.com_and_jacobian
+    monkeypatch.setattr(
+        jk.ik, "com_and_jacobian", lambda *a: calls.append(1) or com_and_jacobian(*a)
+    )
+
+    def solve(T):
+        q0 = jk.neutral(robot)  # traced: no kernel compiled
+        sol = jk.solve_ik(robot, T, q0, frame=["tip"], com=np.zeros(3), num_seeds=1, throw=False)
+        return sol.com_error
+
+    jax.make_jaxpr(solve)(np.eye(4)[None])
+    assert len(calls) == 2
