@@ -92,9 +92,10 @@ def full_rank(J: jax.Array, held: jax.Array, rows: jax.Array | None = None) -> j
     whole-body) Jacobians by their singular values. ``rows`` (m,) bool: the rows that count
     (a row with weight zero is not a target: it is left out of ``m``); default all.
 
-    >>> import jax.numpy as jnp
+    >>> import jax, jax.numpy as jnp
+    >>> check = jax.jit(full_rank)  # one program (op by op, its unrolled Cholesky is ~50 ops)
     >>> J = jnp.eye(6, 7)
-    >>> bool(full_rank(J, jnp.zeros(7, bool))), bool(full_rank(J, jnp.arange(7) == 0))
+    >>> bool(check(J, jnp.zeros(7, bool))), bool(check(J, jnp.arange(7) == 0))
     (True, False)
     """
     dtype = J.dtype
