@@ -17,6 +17,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 from _sampling import sample_configurations
 from _xla import FAST_COMPILE
@@ -28,6 +29,10 @@ SIGMA_P = 1e-4  # m, per axis
 SIGMA_O = 1e-4  # rad, per axis
 M = 100
 M_PLANAR = 10  # poses of the two-link arm's data sets: one set of shapes for all of them
+# Plain gradient descent, one object for the file (optimisers hash by identity: one compiled fit
+# per robot, masks and max_steps), where the fit's outcome is not under test: its loop traces and
+# compiles in a fraction of the default L-BFGS's (line search included).
+_SGD = optax.sgd(1e-7)
 
 
 def _measure(robot: jk.Robot, qs: np.ndarray, noise: np.ndarray | None) -> jax.Array:
@@ -147,11 +152,14 @@ def test_dh_parameters_and_base_recovered_exactly_without_noise():
     params["offset"] = np.array([True, True])
     assert jk.identifiability(nominal, qs, params).unidentifiable == ["base[5]"]
     # ... which calibrate refuses, fits anyway when asked, and reports (its identifiability
-    # check runs the regressor program compiled just above)
+    # check runs the regressor program compiled just above). The report is what is tested, not
+    # the fit: one step of plain gradient descent, whose loop compiles in a fraction of L-BFGS's
     with pytest.raises(jk.JaxkinError, match=r"base\[5\]"):
         jk.calibrate(nominal, qs, Ts, params)
-    res = jk.calibrate(nominal, qs, Ts, params, check_identifiable=False)
-    assert not bool(res.identifiable)
+    res = jk.calibrate(
+        nominal, qs, Ts, params, check_identifiable=False, optimizer=_SGD, max_steps=1
+    )
+    assert not bool(res.identifiable) and int(res.steps) == 1
 
 
 def test_errors():
@@ -235,9 +243,11 @@ def test_status_nan_loss_and_step_budget():
     )
     res = jk.calibrate(robot, qs, Ts, ["a"], optimizer=nan_step)
     assert np.isnan(np.asarray(res.loss_history)).any() and not bool(res.converged)
-    # the step budget runs out before the loss settles
-    res = jk.calibrate(robot, qs, Ts, ["a"], max_steps=2)
+    # the step budget runs out before the loss settles (gradient descent's small steps: the
+    # loop's budget, not the optimiser, is under test)
+    res = jk.calibrate(robot, qs, Ts, ["a"], optimizer=_SGD, max_steps=2)
     assert int(res.steps) == 2 and not bool(res.converged)
+    assert np.all(np.isfinite(np.asarray(res.loss_history)[:1]))
     # unidentifiable, fitted anyway when asked, and reported: in the DH test above
 
 

@@ -353,8 +353,11 @@ def _ur5_with_tool(offset) -> jk.Robot:
 
 def _calibration_loss(robot, T, q_measured):
     """Sum of squared differences between IK solutions (warm-started at the measured angles)
-    and the measured angles; robot traced: derivatives by the implicit function theorem."""
-    sol = jk.solve_ik(robot, T, q_measured, num_seeds=1, max_steps=100, tol=FD_TOL, throw=False)
+    and the measured angles; robot traced: derivatives by the implicit function theorem. One
+    lane, as ``_Solver``'s: the same answers, about a sixth cheaper to compile than 8."""
+    sol = jk.solve_ik(
+        robot, T, q_measured, num_seeds=1, max_steps=100, tol=FD_TOL, lanes=1, throw=False
+    )
     return jnp.sum((sol.q - q_measured) ** 2), sol.converged
 
 
