@@ -214,7 +214,7 @@ def test_float32():
     q0 = sample_configurations(robot, 20, 9).astype(np.float32)
     sol = _solve(robot, T, q0, num_seeds=8, lanes=1)  # one lane: see the round trips
     assert sol.q.dtype == jnp.float32
-    assert float(jnp.mean(sol.converged)) >= 0.95  # default tol 1e-5 in float32
+    assert np.mean(np.asarray(sol.converged)) >= 0.95  # default tol 1e-5 in float32
     ok = np.asarray(sol.converged)
     assert np.all(np.asarray(sol.residual)[ok] <= 1e-5)
     # the optax path in float32 (with x64 on: no float64 cotangent may leak into the loss)
@@ -244,7 +244,7 @@ def test_errors(ur5):
 def test_new_target_values_and_starts_do_not_recompile(ur5):
     jitted = jk.ik._solve_batch.get_jitted()
     qs = sample_configurations(ur5, 8, 11)
-    T = np.asarray(_fk_batch(ur5, jnp.asarray(qs)))
+    T = np.stack([np.asarray(jk.fk(ur5, q)) for q in qs])  # the eager fk of the tests above
     # one target (the solver of the tests above, or compiled here: at most once)
     before = jitted._cache_size()
     jk.solve_ik(ur5, T[0], qs[1], throw=False)

@@ -90,7 +90,8 @@ def legs_case():
     """The LEGS sequence, retargeted in four chunks of ``CHUNK`` steps: every LEGS run of this
     file has chunks of that length (one compiled scan, loaded from the run's compilation cache
     after the first)."""
-    q0 = jk.neutral(LEGS).at[np.array([11, 16])].set(0.6)  # knees bent: away from singular
+    q0 = np.array(jk.neutral(LEGS))  # numpy: no eager scatter programs
+    q0[[11, 16]] = 0.6  # knees bent: away from singular
     qs, gap = smooth_trajectory(LEGS, q0, STEPS, seed=1)
     frames = FEET  # 12 rows, 14 velocities: redundant
     T = fk_frames(LEGS, qs, frames)
@@ -240,7 +241,7 @@ def panda(dtype):
 
 
 def arm_targets(robot, n, seed):
-    q0 = jnp.asarray([0.0, -0.4, 0.0, -2.0, 0.0, 1.6, 0.8], robot.dtype)
+    q0 = np.asarray([0.0, -0.4, 0.0, -2.0, 0.0, 1.6, 0.8], robot.dtype)  # numpy: no program
     qs, gap = smooth_trajectory(robot, q0, n, seed, scale=0.5)
     return qs, gap, np.array(fk_tip(robot, qs))
 
