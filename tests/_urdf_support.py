@@ -1,5 +1,6 @@
 """Shared helpers of the URDF tests: example-robot-data paths, configuration sampling, the batched
-jaxkin kernel (one compile per robot, shared by the Pinocchio and MuJoCo tests), and the map
+jaxkin kernels (per robot: poses and point Jacobians, shared by the Pinocchio and MuJoCo tests;
+every frame's Jacobian in every reference, compiled only where a test reads it), and the map
 between jaxkin's q and Pinocchio's.
 
 Pinocchio is always built here with ``mimic=False`` (every moving URDF joint independent, which
@@ -13,12 +14,11 @@ from __future__ import annotations
 import functools
 import math
 import os
-import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from _sampling import random_q, sample_configurations
 from _xla import FAST_COMPILE
@@ -63,6 +63,39 @@ def point_frames(robot: jk.Robot) -> list[str]:
 POINT = np.array([0.03, -0.02, 0.05])  # m, in the frame's own axes
 
 
+class Outputs(Mapping):
+    """``Case.out``: ``"Ts"`` and ``"<frame>/point"`` from one compiled program, and
+    ``"<frame>/<reference>"`` from a second one, compiled the first time such a key is read (the
+    MuJoCo tests read no reference Jacobian: a process that runs only them does not compile the
+    larger program)."""
+
+    def __init__(self, base: dict[str, np.ndarray], frames: list[str], references) -> None:
+        self._base = base
+        self._frames = {f: i for i, f in enumerate(frames)}
+        self._references = references  # () -> {reference: (N, n_frames, 6, nv)}, called once
+        self._by_reference: dict[str, np.ndarray] | None = None
+
+    def _keys(self) -> list[str]:
+        refs = [f"{f}/{r}" for r in REFERENCES for f in self._frames]
+        return list(self._base) + refs
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if key in self._base:
+            return self._base[key]
+        frame, _, ref = key.rpartition("/")
+        if ref not in REFERENCES or frame not in self._frames:
+            raise KeyError(key)
+        if self._by_reference is None:
+            self._by_reference = self._references()
+        return self._by_reference[ref][:, self._frames[frame]]
+
+    def __iter__(self):
+        return iter(self._keys())
+
+    def __len__(self) -> int:
+        return len(self._keys())
+
+
 @dataclass
 class Case:
     key: str
@@ -70,40 +103,44 @@ class Case:
     robot: jk.Robot
     urdf: URDFModel
     qs: np.ndarray
-    out: dict[str, np.ndarray]
-    seconds: float  # trace + compile + run of the kernel
+    out: Outputs
+
+
+def _batched(fn, qs: np.ndarray) -> dict[str, np.ndarray]:
+    """``fn`` at every row of ``qs`` as one compiled program (``lax.map``: one loop body)."""
+    f = jax.jit(lambda qs: jax.lax.map(fn, qs), compiler_options=FAST_COMPILE)
+    return jax.tree_util.tree_map(np.asarray, f(jax.device_put(qs)))
 
 
 @functools.cache
 def oracle_case(key: str, frames: str = "all") -> Case:
     """Load ``key`` in float64 and evaluate, at N_CONFIGS random configurations within the limits
     (``_sampling.random_q``, fixed seed):
-    ``fk_all``, the geometric Jacobian of every frame in every reference (``frames="all"``), and
-    the world_aligned point Jacobian at POINT of :func:`point_frames` (keys ``"<frame>/point"``).
-    The frames' Jacobians come from one multi-frame call per reference (``frame=[...]``, which
-    test_multi_frame.py shows equal to stacked single-frame calls bit for bit); the point
-    Jacobians from single-frame calls. Cached: the Pinocchio and MuJoCo tests share one compile
-    per robot."""
+    ``fk_all`` and the world_aligned point Jacobian at POINT of :func:`point_frames` (keys
+    ``"Ts"`` and ``"<frame>/point"``, single-frame calls) in one program; in a second one,
+    compiled on the first read of such a key, the geometric Jacobian of every frame in every
+    reference (keys ``"<frame>/<reference>"``; ``frames="all"``, none otherwise): one multi-frame
+    call per reference (``frame=[...]``, which test_multi_frame.py shows equal to stacked
+    single-frame calls bit for bit). Two programs cost what one with both costs (XLA does not
+    share the forward pass between the references). Cached: the Pinocchio and MuJoCo tests share
+    the compiles per robot."""
     path = case_path(key)
     robot = jk.load_urdf(path, dtype=np.float64)
     urdf = parse_urdf(path)
     qs = random_q(robot, N_CONFIGS, SEED)  # numpy: no sampler compiled per robot
     names = list(robot.frame_names) if frames == "all" else []
-    pf = point_frames(robot)
 
-    def one(q):
+    def base(q):
         out = {"Ts": jk.fk_all(robot, q)}
-        for ref in REFERENCES if names else ():  # every frame in one multi-frame pass
-            Js = jk.geometric_jacobian(robot, q, frame=names, reference=ref)
-            out.update({f"{f}/{ref}": Js[i] for i, f in enumerate(names)})
-        for f in pf:  # single-frame calls
+        for f in point_frames(robot):  # single-frame calls
             out[f"{f}/point"] = jk.geometric_jacobian(robot, q, frame=f, point=POINT)
         return out
 
-    t0 = time.perf_counter()
-    f = jax.jit(lambda qs: jax.lax.map(one, qs), compiler_options=FAST_COMPILE)
-    out = jax.tree_util.tree_map(np.asarray, f(jnp.asarray(qs)))
-    return Case(key, path, robot, urdf, qs, out, time.perf_counter() - t0)
+    def every_frame(q):  # every frame in one multi-frame pass per reference
+        return {r: jk.geometric_jacobian(robot, q, frame=names, reference=r) for r in REFERENCES}
+
+    references = functools.partial(_batched, every_frame, qs)
+    return Case(key, path, robot, urdf, qs, Outputs(_batched(base, qs), names, references))
 
 
 class PinocchioMap:
@@ -184,6 +221,7 @@ __all__ = [
     "POINT",
     "REFERENCES",
     "Case",
+    "Outputs",
     "PinocchioMap",
     "case_path",
     "erd_root",
