@@ -40,7 +40,7 @@ def _concrete(x: Scalar) -> bool:
 def _strong_float(x: Scalar) -> bool:
     """A strongly typed floating JAX value, concrete or traced: a Python constant combined
     with it takes its dtype."""
-    return isinstance(x, jax.Array | jax.core.Tracer) and not x.weak_type and x.dtype.kind == "f"
+    return isinstance(x, jax.Array) and not x.weak_type and x.dtype.kind == "f"  # tracers too
 
 
 def _alike(a: Scalar, b: Scalar) -> bool:
