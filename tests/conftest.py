@@ -59,40 +59,40 @@ def _short_locations() -> None:
 
 _short_locations()
 
-
-def _one_cpu_per_process() -> None:
-    """Each process of the run on one CPU of its own (xdist worker ``gwN`` on the N-th CPU it
-    may use, modulo their number), set before JAX starts; subprocesses inherit it.
-
-    jaxlib 0.10's LAPACK kernels (SVD, Cholesky, LU, ...) split a large batch into tasks on
-    XLA's intra-op thread pool and block until they finish; when as many independent batched
-    LAPACK calls run at once as the pool has threads, every thread waits on tasks that no
-    thread is left to run, and the process hangs (seen in CI: both pool threads of a worker in
-    ``ParallelBatchMap`` under ``lapack_dgesdd_ffi``, in test_analysis's vmapped SVDs). The
-    pool has one thread per CPU the process may use, and with one thread jaxlib runs each
-    batch inline. The two workers of a 2-core machine each keep a core: the run's wall time is
-    unchanged. ``JAXKIN_TESTS_ALL_CPUS=1`` leaves the affinity alone.
-    """
-    if os.environ.get("JAXKIN_TESTS_ALL_CPUS") or not hasattr(os, "sched_setaffinity"):
-        return
-    # the CPUs of the run, as the first process found them (the workers inherit its pinning)
-    os.environ.setdefault(
-        "JAXKIN_TESTS_CPUS", ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
-    )
-    cpus = [int(c) for c in os.environ["JAXKIN_TESTS_CPUS"].split(",")]
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
-    index = int(worker[2:]) if worker[2:].isdigit() else 0
-    os.sched_setaffinity(0, {cpus[index % len(cpus)]})
-
-
-_one_cpu_per_process()
-
 import jax  # noqa: E402  (after XLA_FLAGS)
 import pytest  # noqa: E402
 from hypothesis import HealthCheck, Phase, settings  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+def _one_thread_intra_op_pool() -> None:
+    """JAX's CPU client made while this thread runs on one CPU, then the CPUs given back: XLA's
+    intra-op pool gets one thread (its size is the number of CPUs the process may use when the
+    client starts), on the CPU of this xdist worker (``gwN``: the N-th).
+
+    jaxlib 0.10's LAPACK kernels (SVD, Cholesky, LU, ...) split a large batch into tasks on
+    that pool and block until they finish; when as many independent batched LAPACK calls run
+    at once as the pool has threads, no thread is left to run the tasks and the process hangs
+    (CI hung so on 2026-11-26: both pool threads of a worker in ``ParallelBatchMap`` under
+    ``lapack_dgesdd_ffi``, in test_analysis's vmapped SVDs). With one thread, jaxlib runs each
+    batch inline. Only the pool is pinned: the process's other threads and its subprocesses
+    keep every CPU. ``JAXKIN_TESTS_ALL_CPUS=1`` leaves the pool as JAX sizes it.
+    """
+    if os.environ.get("JAXKIN_TESTS_ALL_CPUS") or not hasattr(os, "sched_setaffinity"):
+        return
+    cpus = sorted(os.sched_getaffinity(0))
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    index = int(worker[2:]) if worker[2:].isdigit() else 0
+    os.sched_setaffinity(0, {cpus[index % len(cpus)]})  # this thread only (Linux)
+    try:
+        jax.devices("cpu")  # the client and its thread pools start now
+    finally:
+        os.sched_setaffinity(0, cpus)
+
+
+_one_thread_intra_op_pool()
 
 
 def _shared_compilation_cache() -> str | None:
