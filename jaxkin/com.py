@@ -94,6 +94,8 @@ def com_kernel(robot: Robot, q: jax.Array) -> jax.Array:
     (static). NaN for a total mass of 0."""
     if not robot.has_inertia:
         raise no_inertia_error(robot, "com_kernel")
+    if scan_joints(robot) is None:  # the centre of com_and_jacobian's pass, bit for bit
+        return _unrolled_com_and_jacobian(robot, q, jacobian=False)[0]
     fp = forward_pass(robot, q)
     m, c = _frame_centres(robot, fp)
     return jnp.sum(m[:, None] * c, axis=0) / jnp.sum(m)
@@ -131,11 +133,14 @@ def com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
     return S[0] / total, Jc.T / total
 
 
-def _unrolled_com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+def _unrolled_com_and_jacobian(
+    robot: Robot, q: jax.Array, jacobian: bool = True
+) -> tuple[jax.Array, jax.Array | None]:
     """:func:`com_and_jacobian` as scalars with the model's constants folded (every path
     unrolled): one pass over the tree accumulates each frame's subtree mass ``M`` and
     mass-weighted centre ``S`` from the leaves up, and each joint's column is read from its
-    child's ``M``, ``S``.
+    child's ``M``, ``S``. With ``jacobian=False``, ``(c, None)``: the centre alone, the same
+    operations up to it (:func:`com_kernel`'s centre is this pass's, bit for bit).
 
     Below a free joint (the outermost on a path: a floating base) the poses, sums and columns
     are computed relative to its child frame (:func:`~jaxkin._forward.scalar_pass` with
@@ -166,6 +171,10 @@ def _unrolled_com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, j
             Sf = fold.vadd(fold.vscale(sp.p[f], M[f]), fold.matvec(sp.R[f], Sf))
         M[parent] = fold.add(M[parent], M[f])
         S[parent] = fold.vadd(S[parent], Sf)
+    total = fold.materialize(M[0], dtype)
+    c = fold.stack_vector(S[0], dtype) / total
+    if not jacobian:
+        return c, None
     cols = {r: [(0.0, 0.0, 0.0)] * robot.nv for r in (None, *roots)}
     for j, kind in enumerate(robot.kinds):
         if kind == "fixed":
@@ -175,8 +184,7 @@ def _unrolled_com_and_jacobian(robot: Robot, q: jax.Array) -> tuple[jax.Array, j
     parts = [_stacked(cols[None], dtype)]
     for r in roots:  # columns below a floating base: rotated into world axes
         parts.append(fold.stack_matrix(sp.R[r], dtype) @ _stacked(cols[r], dtype))
-    total = fold.materialize(M[0], dtype)
-    return fold.stack_vector(S[0], dtype) / total, functools.reduce(jnp.add, parts) / total
+    return c, functools.reduce(jnp.add, parts) / total
 
 
 def _free_roots(robot: Robot) -> tuple[int, ...]:
