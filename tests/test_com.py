@@ -484,3 +484,15 @@ def test_kernel_folds_below_each_floating_base_and_takes_a_traced_robot():
     for c, J in jax.jit(both, compiler_options=FAST_COMPILE)(robot, q):
         np.testing.assert_allclose(c, d.subtree_com[0], rtol=0, atol=1e-12)
         np.testing.assert_allclose(J, jac, rtol=0, atol=1e-12)
+
+
+def test_centre_alone_is_the_centre_of_the_pass_with_its_jacobian():
+    """``center_of_mass`` on a tree below floating bases stops the folded centre-and-Jacobian
+    pass before the columns: the same centre bit for bit, compiled on its own."""
+    from jaxkin.com import com_and_jacobian
+
+    robot = jk.load_mjcf(TWO_BODIES, dtype=np.float64)
+    qs = jnp.asarray(random_q(robot, 8, seed=7))
+    alone = jax.jit(jax.vmap(lambda q: jk.center_of_mass(robot, q)), compiler_options=FAST_COMPILE)
+    both = jax.jit(jax.vmap(lambda q: com_and_jacobian(robot, q)), compiler_options=FAST_COMPILE)
+    np.testing.assert_array_equal(alone(qs), both(qs)[0])
