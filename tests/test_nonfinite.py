@@ -93,10 +93,14 @@ _BAD = st.sampled_from([np.nan, np.inf, -np.inf])
 
 @functools.cache
 def _jitted(name):
+    """``(kw, batch) -> (f(**kw), vmap(f)(batch))``: the single and the batched call in one
+    program (one compile per function instead of two; each output is what its own jit gives)."""
     f = CASES[name][0]
-    single = jax.jit(lambda kw: f(**kw), compiler_options=FAST_COMPILE)
-    batched = jax.jit(jax.vmap(lambda kw: f(**kw)), compiler_options=FAST_COMPILE)
-    return single, batched
+
+    def both(kw, batch):
+        return f(**kw), jax.vmap(lambda kw: f(**kw))(batch)
+
+    return jax.jit(both, compiler_options=FAST_COMPILE)
 
 
 @functools.cache
@@ -141,20 +145,20 @@ def test_nonfinite_input_raises_eagerly_and_poisons_under_jit_and_vmap(name, dat
     arg, dirty = _corrupt(data, clean)
     with pytest.raises(jk.JaxkinError, match=rf"{arg} contains NaN or inf"):
         f(**dirty)
-    single, batched = _jitted(name)
+    program = _jitted(name)
     # numpy in, numpy out: the jitted programs take numpy arrays as they are, and stacking or
     # indexing jax arrays eagerly would compile a program per primitive and shape
     clean_j = {k: np.asarray(v, dtype=np.float64) for k, v in clean.items()}
     dirty_j = {k: np.asarray(v, dtype=np.float64) for k, v in dirty.items()}
-    reference = single(clean_j)
+    bad_first = data.draw(st.booleans(), label="bad item first")
+    order = (dirty_j, clean_j) if bad_first else (clean_j, dirty_j)
+    batch = jax.tree_util.tree_map(lambda a, b: np.stack([a, b]), *order)
+    reference, out = program(clean_j, batch)  # the clean input's single call, and the batch
     # the clean call is finite (else the poisoning below proves nothing) and matches eager
     for x in jax.tree_util.tree_leaves(reference):
         assert np.all(np.isfinite(np.asarray(x, dtype=float))), name
     _assert_same(reference, _eager_clean(name), name)
-    _assert_poisoned(single(dirty_j), f"{name} jit, {arg} corrupted")
-    bad_first = data.draw(st.booleans(), label="bad item first")
-    order = (dirty_j, clean_j) if bad_first else (clean_j, dirty_j)
-    out = batched(jax.tree_util.tree_map(lambda a, b: np.stack([a, b]), *order))
+    _assert_poisoned(program(dirty_j, batch)[0], f"{name} jit, {arg} corrupted")
     out = jax.tree_util.tree_map(np.asarray, out)
     bad, good = (0, 1) if bad_first else (1, 0)
     _assert_poisoned(jax.tree_util.tree_map(lambda x: x[bad], out), f"{name} vmap bad item")
