@@ -65,7 +65,7 @@ from ._checks import (
 )
 from ._forward import forward_pass
 from ._jacobian_pass import jacobian_pass
-from ._jit import eager
+from ._jit import eager, robot_jit
 from .errors import JaxkinError, ShapeError
 from .model import Robot
 from .spatial import safe_sqrt
@@ -419,10 +419,22 @@ def manipulability_gradient(
 
 def _manipulability_gradient_kernel(robot, q, frame, point, measure, idx, reference):
     def m(qq):
-        J = jacobian_pass(robot, qq, frame, point, reference).matrix()
+        J = _jacobian_matrix(robot, qq, frame=frame, point=point, reference=reference)
         return _manipulability(J if idx is None else _take_rows(J, idx), measure)
 
     return jax.grad(m)(q)
+
+
+def _jacobian_matrix_impl(robot, q, frame, point, reference):
+    return jacobian_pass(robot, q, frame, point, reference).matrix()
+
+
+# The Jacobian of q as a nested jit (a concrete robot static, its constants folded as when traced
+# inline): JAX traces it, and differentiates and batches its jaxpr, once per robot, frame,
+# reference and shapes, shared by every manipulability gradient of one computation (one per
+# measure and rows) instead of once per call (a third of the trace time of nine gradients of
+# the UR5). The compiled program holds the same operations: the same values, bit for bit.
+_jacobian_matrix = robot_jit(_jacobian_matrix_impl, ("frame", "reference"))
 
 
 # Eagerly one compiled program per robot and options (op by op, the gradient dispatched and

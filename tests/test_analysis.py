@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _sampling import sample_configurations
-from _xla import FAST_COMPILE
+from _xla import FAST_COMPILE, jaxpr_eqns
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -163,6 +163,21 @@ def test_manipulability_gradient_matches_closed_form_toolbox_and_fd():
                 g_rows[r], model.jacobm(q, axes=axes).ravel(), rtol=1e-9, atol=1e-12
             )
         np.testing.assert_allclose(g, fd, rtol=0, atol=1e-7)
+
+
+def test_manipulability_gradients_trace_the_jacobian_once():
+    # Every gradient of one robot and frame uses the same traced (and differentiated) Jacobian
+    # program, whatever the measure: traced once per computation, not once per call.
+    planar = jk.robots.load("two_link_planar", dtype=np.float64)
+
+    def grads(q):
+        return [jk.manipulability_gradient(planar, q, m) for m in analysis.MEASURES]
+
+    eqns = jaxpr_eqns(grads, jnp.zeros(2))
+    calls = [e for e in eqns if "jacobian_matrix" in str(e.params.get("name"))]
+    assert len(calls) >= len(analysis.MEASURES)
+    # one program for the linearised pass, one for its transpose, each shared by the measures
+    assert len({id(e.params["jaxpr"]) for e in calls}) <= 2
 
 
 @jax.jit(compiler_options=FAST_COMPILE)
