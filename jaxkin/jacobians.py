@@ -19,6 +19,14 @@ reference           point                                  basis
 
 Identities: ``J_local = blkdiag(R^T, R^T) J_world_aligned`` and ``J_world = Ad(T) J_local``,
 whose linear rows are ``J_v + skew(p) J_w``.
+
+Several references at once: ``reference`` a tuple (or list) of names, e.g.
+``("local", "world", "world_aligned")`` (Pinocchio's LOCAL, WORLD, LOCAL_WORLD_ALIGNED), gives a
+tuple of Jacobians in that order (duplicates allowed, not empty), each equal bit for bit to the
+call with that reference alone. The Jacobians of this module take it (:func:`geometric_jacobian`,
+:func:`frame_jacobian`, :func:`jacobian_fwd`, :func:`jacobian_rev`; ``jk.jacobian_dot`` and
+``jk.twist`` take one reference); ``jacobian_fwd``/``jacobian_rev`` then differentiate forward
+kinematics once for all of them.
 """
 
 from __future__ import annotations
@@ -55,13 +63,22 @@ __all__ = [
 ]
 
 
-def _matrix(robot: Robot, q: jax.Array, frame, point, reference: str) -> jax.Array:
-    return geometric_pass(robot, q, frame, point, reference).matrix()
+def _passes(robot: Robot, q: jax.Array, frame, point, reference) -> list:
+    refs = reference if isinstance(reference, tuple) else (reference,)
+    return [geometric_pass(robot, q, frame, point, ref) for ref in refs]
 
 
-def _matrix_and_pose(robot: Robot, q: jax.Array, frame, point, reference: str):
-    g = geometric_pass(robot, q, frame, point, reference)
-    return g.matrix(), g.pose()
+def _matrix(robot: Robot, q: jax.Array, frame, point, reference):
+    """The geometric Jacobian in ``reference``, or a tuple of them for a tuple of references."""
+    Js = tuple(g.matrix() for g in _passes(robot, q, frame, point, reference))
+    return Js if isinstance(reference, tuple) else Js[0]
+
+
+def _matrix_and_pose(robot: Robot, q: jax.Array, frame, point, reference):
+    """``(J, T)``; ``J`` a tuple (one per reference) when ``reference`` is a tuple."""
+    passes = _passes(robot, q, frame, point, reference)
+    Js = tuple(g.matrix() for g in passes)
+    return (Js if isinstance(reference, tuple) else Js[0]), passes[0].pose()
 
 
 _geometric = eager(_matrix, ("frame", "reference"))
@@ -75,10 +92,10 @@ def geometric_jacobian(
     q: Any,
     frame: Any = None,
     point: Any = None,
-    reference: str = "world_aligned",
-) -> jax.Array:
+    reference: str | tuple[str, ...] = "world_aligned",
+) -> jax.Array | tuple[jax.Array, ...]:
     """Geometric Jacobian ``J(q)`` with ``[v; omega] = J(q) @ qd``; shape (6, nv), or (k, 6, nv)
-    for several frames (``frame`` a list or tuple).
+    for several frames (``frame`` a list or tuple); for a tuple of references, a tuple of them.
 
     Built column by column from one forward pass (the chapter's Table 4.1): a revolute joint i
     contributes ``[z_i x (p - o_i); z_i]``, a prismatic one ``[z_i; 0]``, a joint not on the path
@@ -99,6 +116,8 @@ def geometric_jacobian(
         own axes; the linear rows then give that point's velocity. For several frames: (3,) for
         every frame, or (k, 3), row i in frame i's axes.
       reference: ``"world_aligned"`` (default), ``"local"`` or ``"world"``; see the module doc.
+        A tuple (or list) of them gives a tuple of Jacobians in that order, each equal to the
+        call with that reference alone.
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("two_link_planar")
@@ -109,9 +128,14 @@ def geometric_jacobian(
     ([-1.0, -1.0], [1.0, 1.0])
     >>> jk.geometric_jacobian(robot, jnp.zeros(2), frame=["link1", "link2"]).shape
     (2, 6, 2)
+    >>> q = jnp.zeros(2)
+    >>> J_wa, J_local = jk.geometric_jacobian(robot, q, reference=("world_aligned", "local"))
+    >>> bool(jnp.array_equal(J_local, jk.geometric_jacobian(robot, q, reference="local")))
+    True
     """
-    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.geometric_jacobian")
-    return _geometric(robot, q, f, pt, reference)
+    fn = "jk.geometric_jacobian"
+    q, f, pt, ref = _check_frame_call(robot, q, frame, point, reference, fn)
+    return _geometric(robot, q, f, pt, ref)
 
 
 def frame_jacobian(
@@ -119,11 +143,12 @@ def frame_jacobian(
     q: Any,
     frame: Any = None,
     point: Any = None,
-    reference: str = "world_aligned",
-) -> tuple[jax.Array, jax.Array]:
+    reference: str | tuple[str, ...] = "world_aligned",
+) -> tuple[Any, jax.Array]:
     """``(J, T)``: the geometric Jacobian (6, nv) of :func:`geometric_jacobian` and the frame's
     pose ``T_world_frame`` (4, 4) (its origin, not ``point``), from one forward pass; for several
     frames (``frame`` a list or tuple) ``J`` (k, 6, nv) and ``T`` (k, 4, 4), from one pass too.
+    For a tuple of references ``J`` is a tuple of Jacobians, one per reference in that order.
 
     For solvers and controllers that need both at every step (IK, resolved-rate control,
     calibration); as pytorch_kinematics' ``jacobian(..., ret_eef_pose=True)``.
@@ -134,25 +159,39 @@ def frame_jacobian(
     >>> J.shape, T.shape
     ((6, 6), (4, 4))
     """
-    q, f, pt = _check_frame_call(robot, q, frame, point, reference, "jk.jacobians.frame_jacobian")
-    return _geometric_and_pose(robot, q, f, pt, reference)
+    fn = "jk.jacobians.frame_jacobian"
+    q, f, pt, ref = _check_frame_call(robot, q, frame, point, reference, fn)
+    return _geometric_and_pose(robot, q, f, pt, ref)
 
 
 def _check_frame_call(robot, q, frame, point, reference, fn, several: bool = True):
-    """The checks shared by every Jacobian entry point: ``(q, frame, point)``, the frame an
-    index and the point None or (3,), or for several frames (``several``) a tuple of indices and
-    the points None or (k, 3)."""
-    check_reference(reference)
+    """The checks shared by every Jacobian entry point: ``(q, frame, point, reference)``, the
+    frame an index and the point None or (3,), or for several frames (``several``) a tuple of
+    indices and the points None or (k, 3); the reference a name, or a tuple of them."""
+    reference = _check_references(reference, fn)
     q = check_q(robot, q, fn=fn, host=True)
     dtype = result_dtype(robot, q)
     frames = check_frames(robot, frame, fn)
     if frames is None:
-        return q, robot.frame_index(frame), check_point(point, dtype, fn)
+        return q, robot.frame_index(frame), check_point(point, dtype, fn), reference
     if not several:
         raise JaxkinError(
             f"{fn} takes one frame (a name or an index), got {len(frames)}: call it once per frame."
         )
-    return q, frames, check_points(point, len(frames), dtype, fn)
+    return q, frames, check_points(point, len(frames), dtype, fn), reference
+
+
+def _check_references(reference: Any, fn: str) -> str | tuple[str, ...]:
+    """One reference name, or a list or tuple of them (not empty) as a tuple; each name checked
+    by ``check_reference``."""
+    if not isinstance(reference, (list, tuple)):
+        return check_reference(reference)
+    if not reference:
+        raise JaxkinError(
+            f"{fn}: reference must be one of {REFERENCES} or a tuple of them, got an empty "
+            f"{type(reference).__name__}. Name at least one, e.g. reference=('local', 'world')."
+        )
+    return tuple(check_reference(ref) for ref in reference)
 
 
 def change_reference(
@@ -193,14 +232,20 @@ def change_reference(
 
 
 def _autodiff_jacobian(robot, q, frame, point, reference, mode, fn):
-    q, f, pt = _check_frame_call(robot, q, frame, point, reference, fn)
-    return _autodiff(robot, q, f, pt, reference, mode)
+    q, f, pt, ref = _check_frame_call(robot, q, frame, point, reference, fn)
+    return _autodiff(robot, q, f, pt, ref, mode)
 
 
-def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
+def jacobian_fwd(
+    robot, q, frame=None, point=None, reference="world_aligned"
+) -> jax.Array | tuple[jax.Array, ...]:
     """The geometric Jacobian from ``jax.jacfwd`` of forward kinematics; shape (6, nv), or
     (k, 6, nv) for several frames (``frame`` and ``point`` as in :func:`geometric_jacobian`:
     one forward pass, differentiated once).
+
+    ``reference`` a tuple (or list) of references gives a tuple of Jacobians in that order from
+    one differentiation (each equal bit for bit to the call with that reference alone): cheaper
+    to trace and compile than one call per reference.
 
     Linear rows are d(point)/dq; angular rows are ``vee(dR/dq_k R^T)``. Independent of the
     hand-built Table 4.1 assembly, so the two check each other. For a robot with free, ball or
@@ -212,13 +257,19 @@ def jacobian_fwd(robot, q, frame=None, point=None, reference="world_aligned") ->
     >>> q = jnp.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     >>> bool(jnp.allclose(jk.jacobian_fwd(robot, q), jk.geometric_jacobian(robot, q)))
     True
+    >>> J_local, J_world = jk.jacobian_fwd(robot, q, reference=("local", "world"))
+    >>> J_local.shape, J_world.shape
+    ((6, 6), (6, 6))
     """
     return _autodiff_jacobian(robot, q, frame, point, reference, "fwd", "jk.jacobian_fwd")
 
 
-def jacobian_rev(robot, q, frame=None, point=None, reference="world_aligned") -> jax.Array:
+def jacobian_rev(
+    robot, q, frame=None, point=None, reference="world_aligned"
+) -> jax.Array | tuple[jax.Array, ...]:
     """As :func:`jacobian_fwd` but with ``jax.jacrev`` (reverse mode); shape (6, nv) (or
-    (k, 6, nv) for several frames).
+    (k, 6, nv) for several frames; a tuple of them for a tuple of references, from one
+    differentiation).
 
     >>> import jax.numpy as jnp, jaxkin as jk
     >>> robot = jk.robots.load("puma560")
@@ -280,7 +331,7 @@ def analytical_jacobian(
     if method not in ("chain", "jacfwd"):
         raise JaxkinError(f"method must be 'chain' or 'jacfwd', got {method!r}.")
     fn = "jk.analytical_jacobian"
-    q, f, pt = _check_frame_call(robot, q, frame, point, "world_aligned", fn, several=False)
+    q, f, pt, _ = _check_frame_call(robot, q, frame, point, "world_aligned", fn, several=False)
     Ja, margin = _analytical(robot, q, f, pt, representation, method)
     if return_margin:
         return Ja, margin

@@ -14,6 +14,10 @@ central finite differences on SE(3).
   kinematics (h = 1e-6, to 1e-7): linear rows from the frame origin's positions, angular rows from
   ``log_so3(R(q + h e_k) R(q - h e_k)^T) / (2 h)``; "local" rotates both into the frame's axes,
   "world" uses ``v + skew(p) omega`` (the velocity of the point at the world origin).
+* ``reference=(...)`` (a tuple or list of references) gives a tuple of Jacobians in that order,
+  each equal bit for bit to the call with that reference alone (the zoo kernel takes
+  ``jacobian_fwd``/``jacobian_rev`` that way: one differentiation traced, not three); a bad or
+  empty one is refused by name before anything is traced.
 
 The float64 kernels of one robot are compiled once (``float64_results``, cached) and shared by the
 tests that need them, to keep the file fast.
@@ -108,8 +112,12 @@ def _zoo_kernel(robot: jk.Robot, qs: jax.Array, qs_fd: jax.Array):
         out = {}
         for ref in REFERENCES:
             out["geometric", ref] = jk.geometric_jacobian(robot, q, reference=ref)
-            out["fwd", ref] = jk.jacobian_fwd(robot, q, reference=ref)
-            out["rev", ref] = jk.jacobian_rev(robot, q, reference=ref)
+        # every reference from one differentiation each (traced once, not three times; the
+        # tuple equals the separate calls bit for bit: test_reference_tuple_...)
+        fwd = jk.jacobian_fwd(robot, q, reference=REFERENCES)
+        rev = jk.jacobian_rev(robot, q, reference=REFERENCES)
+        for ref, Jf, Jr in zip(REFERENCES, fwd, rev, strict=True):
+            out["fwd", ref], out["rev", ref] = Jf, Jr
         return out
 
     def tip(q):
@@ -332,3 +340,46 @@ def test_jacobian_triangle_finite_differences_and_references(name):
             np.testing.assert_allclose(
                 jac["geometric", ref][k], fd[ref], rtol=0, atol=1e-7, err_msg=f"{ref} q={q}"
             )
+
+
+def test_reference_tuple_equals_the_separate_calls_bit_for_bit():
+    """``reference=(...)`` gives a tuple of Jacobians in the order asked (duplicates allowed; a
+    list as a tuple), each equal bit for bit to the call with that reference alone;
+    ``frame_jacobian`` returns ``(Js, T)``. (``geometric_jacobian``'s tuple: its doctest.) Seven
+    small compiles: a few references per function, on the smallest robot."""
+    robot = jk.robots.load("two_link_planar", dtype=np.float64)
+    q = np.array([0.3, -0.7])
+    refs = ("local", "world", "local")  # Pinocchio's names LOCAL, WORLD; a duplicate
+    together = jk.jacobian_fwd(robot, q, reference=refs)
+    assert isinstance(together, tuple) and len(together) == len(refs)
+    for ref, J in zip(refs, together, strict=True):
+        alone = np.asarray(jk.jacobian_fwd(robot, q, reference=ref))
+        np.testing.assert_array_equal(np.asarray(J), alone, err_msg=ref)
+    as_list = jk.jacobian_fwd(robot, q, reference=list(refs))
+    assert isinstance(as_list, tuple)
+    np.testing.assert_array_equal(np.asarray(as_list), np.asarray(together))
+    several = dict(frame=["link1", "link2"], point=np.array([0.1, 0.2, 0.0]))  # (2, 6, 2) each
+    _, J_local = jk.jacobian_rev(robot, q, reference=("world", "local"), **several)
+    alone = np.asarray(jk.jacobian_rev(robot, q, reference="local", **several))
+    assert alone.shape == (2, 6, 2)
+    np.testing.assert_array_equal(np.asarray(J_local), alone)
+    Js, T = jk.jacobians.frame_jacobian(robot, q, reference=("world", "local"))
+    assert isinstance(Js, tuple) and len(Js) == 2 and T.shape == (4, 4)
+    local = np.asarray(jk.geometric_jacobian(robot, q, reference="local"))
+    np.testing.assert_array_equal(np.asarray(Js[1]), local)
+
+
+@pytest.mark.parametrize(
+    "fn", [jk.geometric_jacobian, jk.jacobian_fwd, jk.jacobian_rev, jk.jacobians.frame_jacobian]
+)
+def test_bad_reference_in_a_tuple_is_refused_before_tracing(fn):
+    robot = jk.robots.load("two_link_planar", dtype=np.float64)
+    q = np.zeros(2)
+    with pytest.raises(jk.JaxkinError, match=r"reference must be one of .*got 'body'"):
+        fn(robot, q, reference=("local", "body"))
+    with pytest.raises(jk.JaxkinError, match=r"got an empty tuple\. Name at least one"):
+        fn(robot, q, reference=())
+    with pytest.raises(jk.JaxkinError, match=r"got an empty list"):
+        fn(robot, q, reference=[])
+    with pytest.raises(jk.JaxkinError, match=r"reference must be one of .*got 'body'"):
+        fn(robot, q, reference="body")
