@@ -93,15 +93,9 @@ def _hessian_kernel(robot: jk.Robot, qs):
             for ref in REFERENCES
         }
         eye = jnp.eye(robot.dof, dtype=q.dtype)
-        out["fd_H"] = jax.vmap(
-            lambda e: (
-                (
-                    jk.geometric_jacobian(robot, q + H * e, frame=f6)
-                    - jk.geometric_jacobian(robot, q - H * e, frame=f6)
-                )
-                / (2 * H)
-            )
-        )(eye)
+        steps = jnp.concatenate([q[None] + H * eye, q[None] - H * eye])  # one traced Jacobian
+        Js = jax.vmap(lambda x: jk.geometric_jacobian(robot, x, frame=f6))(steps)
+        out["fd_H"] = (Js[: robot.dof] - Js[robot.dof :]) / (2 * H)  # [k] = dJ/dq_k
         out["Htip"] = jk.kinematic_hessian(robot, q)
         out["Jtip"] = jk.geometric_jacobian(robot, q)  # for the closed form of Haviland & Corke
         return out
