@@ -16,11 +16,11 @@ from __future__ import annotations
 import functools
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from _legs import FEET, LEGS
-from _xla import FAST_COMPILE, sampler
+from _sampling import random_q  # numpy: the sampler is not under test here
+from _xla import FAST_COMPILE
 
 import jaxkin as jk
 from jaxkin.ik import RESULTS
@@ -46,7 +46,13 @@ def _fk_batch(robot: jk.Robot, frames: tuple):
 
 
 def fk_frames(robot, qs, frames):
-    return np.asarray(_fk_batch(robot, tuple(frames))(jnp.asarray(qs)))
+    return np.asarray(_fk_batch(robot, tuple(frames))(np.asarray(qs)))
+
+
+def on_host(tree):
+    """A solution's arrays as numpy (the assertions' comparisons and reductions run in numpy: on
+    JAX arrays each would compile a program of its own)."""
+    return jax.tree_util.tree_map(np.asarray, tree)
 
 
 def centres_of_mass(qs) -> np.ndarray:
@@ -54,9 +60,8 @@ def centres_of_mass(qs) -> np.ndarray:
     return np.stack([np.asarray(jk.center_of_mass(LEGS, q)) for q in np.asarray(qs)])
 
 
-def targets(robot, n, key, frames):
-    qs = sampler(robot, n)(jax.random.key(key))
-    return fk_frames(robot, qs, frames)
+def targets(robot, n, seed, frames):
+    return fk_frames(robot, random_q(robot, n, seed), frames)
 
 
 # ----------------------------------------------------------------------------- Solo12
@@ -66,7 +71,7 @@ def solo_case():
     feet = list(robot.default_frames)
     T = targets(robot, 50, 11, feet)
     sol = jk.solve_ik(robot, T, jk.neutral(robot), frame=feet, throw=False)
-    return robot, feet, T, sol
+    return robot, feet, T, on_host(sol)
 
 
 def test_solo12_four_feet_all_converge_from_neutral_with_defaults():
@@ -97,7 +102,7 @@ def test_throw_raises_with_every_solution_kept():
     far[0, 1, :3, 3] += [0.0, -5.0, 0.0]
     with pytest.raises(jk.IKError, match=r"1 of 50 target\(s\) not reached") as info:
         jk.solve_ik(robot, far, jk.neutral(robot), frame=feet)
-    sol = info.value.solution
+    sol = on_host(info.value.solution)
     assert not sol.converged[0] and np.all(sol.converged[1:])
     assert sol.result[0] in (RESULTS.stalled, RESULTS.max_steps_reached)
 
@@ -118,9 +123,9 @@ def legs_case():
 
 @functools.cache
 def legs_draw() -> np.ndarray:
-    """N + 2 random configurations of LEGS from one draw (one compile of the sampler): the N
+    """N + 2 random configurations of LEGS from one numpy draw (nothing compiled): the N
     targets' configurations, the posture, and the float32 test's configuration."""
-    return np.asarray(sampler(LEGS, N + 2)(jax.random.key(3)))
+    return random_q(LEGS, N + 2, seed=3)
 
 
 @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
@@ -152,7 +157,7 @@ def solve_legs(T, weights=1.0, com_weight=0.0, posture_weight=0.0, T_dot=None):
     _, com, q_ref = legs_case()
     T_dot = np.zeros_like(T) if T_dot is None else T_dot
     weights = np.broadcast_to(weights, (2, 6))
-    return _solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight)
+    return on_host(_solve_legs(T, T_dot, com, q_ref, weights, com_weight, posture_weight))
 
 
 def test_ball_joints_and_a_floating_base_converge_with_unit_quaternions():
@@ -241,7 +246,7 @@ def test_float32_single_frame_of_a_floating_robot():
         lambda T: jk.solve_ik(robot, T, jk.neutral(robot), frame="l_foot", throw=False),
         compiler_options=FAST_COMPILE,
     )
-    sol = solve(T)
+    sol = on_host(solve(T))
     assert sol.converged and sol.q.dtype == np.float32 and sol.position_error.shape == ()
     assert sol.residual <= 1e-5
     Tq = np.asarray(jk.fk(robot, sol.q, frame="l_foot"))
@@ -267,7 +272,7 @@ def test_implicit_derivative_moves_the_frames_with_their_targets():
     sol, dq = solve_legs(T, T_dot=T_dot)
     assert np.all(sol.converged)
     np.testing.assert_allclose(fk_frames(LEGS, sol.q, FEET), T, atol=1e-9)
-    dT = _fk_tangents(jnp.asarray(sol.q), jnp.asarray(dq))
+    dT = _fk_tangents(sol.q, dq)
     np.testing.assert_allclose(dT, T_dot, atol=1e-8)
 
 

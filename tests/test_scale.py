@@ -136,7 +136,10 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
     and a 36-joint one by its length: test_long_chain_program_size_does_not_grow_with_length);
     lifting both thresholds unrolls it: the two passes agree. Each pass is traced afresh, in
     three programs (:func:`_every_entry_point`; eager calls would reuse the executables cached
-    for the first pass: the robot is the same value, so the unrolled pass would never run)."""
+    for the first pass: the robot is the same value, so the unrolled pass would never run). The
+    scanned pass runs compiled (``lax.scan`` lowered is what is under test); the unrolled pass,
+    the reference, runs op by op (``jax.disable_jit``: its primitives compile once per shape, for
+    both conventions, instead of three programs each; the same operations' values)."""
     robot = _chain(8, seed=3, convention=convention)
     assert kinematics.uses_scan(robot)
     q = jnp.asarray(np.random.default_rng(2).uniform(-1, 1, robot.dof))
@@ -147,10 +150,15 @@ def test_scan_path_equals_unrolled_path(convention, monkeypatch):
         monkeypatch.setattr(kinematics, "SCAN_MIN_JOINTS", joints)
         monkeypatch.setattr(kinematics, "SCAN_MIN_UNFOLDED", unfolded)
         assert kinematics.uses_scan(robot) == (joints == defaults[0])
+        scanned = joints == defaults[0]
         programs = [fast(every) for every in _every_entry_point(robot)]
         scans = sum(str(p.trace(q, qd).jaxpr).count(" scan[") for p in programs)
-        assert (scans > 0) == (joints == defaults[0]), scans  # the pass asked for was traced
-        outs.append([out for p in programs for out in p(q, qd)])
+        assert (scans > 0) == scanned, scans  # the pass asked for was traced
+        if scanned:
+            outs.append([out for p in programs for out in p(q, qd)])
+        else:
+            with jax.disable_jit():
+                outs.append([out for every in _every_entry_point(robot) for out in every(q, qd)])
     for a, b in zip(*outs, strict=True):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
 
@@ -299,7 +307,9 @@ SHARDED = textwrap.dedent(
 
 
 def test_sharded_equals_unsharded_on_four_host_devices():
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    # the run's XLA_FLAGS (its quick compiles) kept: one and four devices compile alike
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4"
+    env = dict(os.environ, XLA_FLAGS=flags.strip())
     env["JAX_PLATFORMS"] = "cpu"
     res = subprocess.run(
         [sys.executable, "-c", SHARDED], env=env, capture_output=True, text=True, timeout=600
