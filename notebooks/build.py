@@ -109,6 +109,11 @@ def reset_kernel():
     np.set_printoptions(**fresh.printoptions)
     jax.config.update("jax_enable_x64", fresh.x64)
     os.chdir(fresh.cwd)
+    # figures drawn once, not twice: the inline backend's bbox_inches="tight" draws each figure
+    # to find its extent before drawing it again (a third of the figures' cost; only here, in
+    # the tests' kernel: the committed outputs keep the default)
+    from matplotlib_inline.config import InlineBackend
+    InlineBackend.instance().print_figure_kwargs = {"bbox_inches": None}
 
 
 reset_kernel()

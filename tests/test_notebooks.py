@@ -8,8 +8,9 @@ The notebooks run one after the other in one kernel (``build.kernel``; ``build.R
 what the previous one left: names, figures, print options, JAX's float64 switch), which saves
 each one a kernel's start and the imports of jax, matplotlib, sympy and jaxkin; ``python
 notebooks/build.py`` still runs each in a fresh kernel. The kernel inherits the suite's
-``XLA_FLAGS`` (LLVM's optimisation off, tests/conftest.py); the committed outputs come from XLA's
-defaults.
+``XLA_FLAGS`` (LLVM's optimisation off, tests/conftest.py) and draws each figure once (no
+``bbox_inches="tight"``, which draws it twice; every figure still drawn and shown); the committed
+outputs come from XLA's and the inline backend's defaults.
 """
 
 import importlib.util
