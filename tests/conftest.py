@@ -5,8 +5,10 @@ The float32 tests build float32 robots and inputs explicitly (x64 stays on globa
 what a float64 user has; jaxkin itself never flips the flag).
 """
 
+import atexit
 import os
 import shutil
+import sys
 import tempfile
 
 QUICK_COMPILE_FLAGS = (
@@ -122,6 +124,31 @@ def _shared_compilation_cache() -> str | None:
 
 
 _CACHE_MADE_HERE = _shared_compilation_cache()
+
+
+def _worker_exits_without_teardown() -> None:
+    """An xdist worker leaves, once its session is over, without freeing what it compiled.
+
+    A worker holds thousands of compiled programs (kernels, and every primitive run op by op) at
+    the end of the run, and Python's shutdown destroys them one by one (seconds: 2,000 small
+    programs take ~4 s to free), while the run waits for both workers to exit. Results reach the
+    controller through xdist's channel before shutdown starts, so the worker's last act is to
+    flush its output and ``os._exit`` in the first exit handler (registered after JAX's, so run
+    before it). Only in xdist workers, and not under coverage (whose data a worker writes at
+    exit): a plain ``pytest -n 0`` run shuts down normally.
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER") or "coverage" in sys.modules:
+        return
+
+    def leave() -> None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
+
+    atexit.register(leave)
+
+
+_worker_exits_without_teardown()
 
 # "ci" (default): reproducible (derandomized) and bounded; no shrinking, since each example of a
 # random topology costs about a second of JAX dispatch and shrinking would take minutes. Use
