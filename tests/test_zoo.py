@@ -345,8 +345,8 @@ def test_jacobian_triangle_finite_differences_and_references(name):
 def test_reference_tuple_equals_the_separate_calls_bit_for_bit():
     """``reference=(...)`` gives a tuple of Jacobians in the order asked (duplicates allowed; a
     list as a tuple), each equal bit for bit to the call with that reference alone;
-    ``frame_jacobian`` returns ``(Js, T)``. (``geometric_jacobian``'s tuple: its doctest.) Seven
-    small compiles: a few references per function, on the smallest robot."""
+    ``frame_jacobian`` returns ``(Js, T)``, ``T`` the single call's pose. (``geometric_jacobian``'s
+    tuple: its doctest.) Small compiles: a few references per function, the smallest robot."""
     robot = jk.robots.load("two_link_planar", dtype=np.float64)
     q = np.array([0.3, -0.7])
     refs = ("local", "world", "local")  # Pinocchio's names LOCAL, WORLD; a duplicate
@@ -364,9 +364,10 @@ def test_reference_tuple_equals_the_separate_calls_bit_for_bit():
     assert alone.shape == (2, 6, 2)
     np.testing.assert_array_equal(np.asarray(J_local), alone)
     Js, T = jk.jacobians.frame_jacobian(robot, q, reference=("world", "local"))
-    assert isinstance(Js, tuple) and len(Js) == 2 and T.shape == (4, 4)
-    local = np.asarray(jk.geometric_jacobian(robot, q, reference="local"))
-    np.testing.assert_array_equal(np.asarray(Js[1]), local)
+    assert isinstance(Js, tuple) and len(Js) == 2
+    J_alone, T_alone = jk.jacobians.frame_jacobian(robot, q, reference="local")
+    np.testing.assert_array_equal(np.asarray(Js[1]), np.asarray(J_alone))
+    np.testing.assert_array_equal(np.asarray(T), np.asarray(T_alone))  # the frame's pose, once
 
 
 @pytest.mark.parametrize(
