@@ -135,15 +135,19 @@ def _pooled_rate(rows: Rows, key: str) -> str:
 
 
 def case_table(rows: Rows, robot: str) -> str:
-    """A free-flyer robot's cases: jaxkin's rate per N with its ratios to Pinocchio's stored
-    and unstored loops, the two Pinocchio loops (samples pooled over N), compile time at the
-    largest N and the check."""
-    sel = [r for r in rows if r["robot"] == robot and r["impl"] == "jaxkin"]
+    """A free-flyer robot's cases: jaxkin's rate per N (``jit(vmap)``, then
+    ``chunked_map`` into an array) with its ratios to Pinocchio's stored and unstored loops,
+    the two Pinocchio loops (samples pooled over N), compile time at the largest N and the
+    check."""
+    sel = [r for r in rows if r["robot"] == robot and r["impl"] in ("jaxkin", CHUNKED)]
     ns = sorted({r["n"] for r in sel})
     lines = []
-    for quantity in dict.fromkeys(r["quantity"] for r in sel):
-        rs = {r["n"]: r for r in sel if r["quantity"] == quantity}
-        compiled = [r for r in rs.values() if "compile_s" in r]
+    present = {(r["quantity"], r["impl"]) for r in sel}
+    quantities = dict.fromkeys(r["quantity"] for r in sel)
+    keys = [(q, i) for q in quantities for i in ("jaxkin", CHUNKED) if (q, i) in present]
+    for quantity, impl in keys:
+        rs = {r["n"]: r for r in sel if (r["quantity"], r["impl"]) == (quantity, impl)}
+        compiled = [r for r in rs.values() if "compile_s" in r or "chunk_compile_s" in r]
         comp = compiled[-1] if compiled else None
         diffs = [r["max_abs_diff"] for r in rs.values() if "max_abs_diff" in r]
         cells = []
@@ -158,31 +162,47 @@ def case_table(rows: Rows, robot: str) -> str:
         lines.append(
             [
                 quantity,
+                "jit(vmap)" if impl == "jaxkin" else "chunked_map into an array",
                 *cells,
                 _pooled_rate(list(rs.values()), "pin_stored_samples_s"),
                 _pooled_rate(list(rs.values()), "pin_samples_s"),
-                f"{comp['lower_s'] + comp['compile_s']:.2f}" if comp else "",
+                f"{_compile_s(comp):.2f}" if comp else "",
                 fmt_diff(max(diffs)) if diffs else "",
             ]
         )
     header = [
         "quantity",
+        "jaxkin",
         *(f"N = {fmt_n(n)}" for n in ns),
         "Pinocchio stored",
         "Pinocchio unstored",
-        "lower + compile s",
+        "compile s",
         "max abs diff",
     ]
-    return markdown_table(header, lines, "l" + "r" * (len(ns) + 4))
+    return markdown_table(header, lines, "ll" + "r" * (len(ns) + 4))
 
 
-def _summary_row(rows: Rows, robot: str, quantity: str) -> dict[str, Any] | None:
-    """The float64 jaxkin row of ``robot``/``quantity`` at N = 100k, else the largest N."""
+def _compile_s(row: dict[str, Any]) -> float:
+    """A row's compile seconds: ``lower`` + ``compile`` of a ``jit(vmap)`` row, or the trace,
+    lowering and compile a :data:`CHUNKED` row's first call reported."""
+    if "chunk_compile_s" in row:
+        return row["chunk_compile_s"]
+    return row["lower_s"] + row["compile_s"]
+
+
+CHUNKED = "jaxkin chunked_map"
+"""The impl of the rows that write the N results into a preallocated array through
+``jk.batch.chunked_map`` (``bench.jacobians.Bench.chunked_rows``)."""
+
+
+def _summary_row(
+    rows: Rows, robot: str, quantity: str, impl: str = "jaxkin"
+) -> dict[str, Any] | None:
+    """The float64 ``impl`` row of ``robot``/``quantity`` at N = 100k, else the largest N."""
     sel = [
         r
         for r in rows
-        if (r["robot"], r["impl"], r["quantity"], r["dtype"])
-        == (robot, "jaxkin", quantity, "float64")
+        if (r["robot"], r["impl"], r["quantity"], r["dtype"]) == (robot, impl, quantity, "float64")
         and r["status"] == "ok"
     ]
     if not sel:
@@ -191,11 +211,19 @@ def _summary_row(rows: Rows, robot: str, quantity: str) -> dict[str, Any] | None
     return at[0] if at else max(sel, key=lambda r: r["n"])
 
 
+def _verdict(stored: float, compile_s: float, target: float) -> str:
+    if math.isnan(stored):  # a run from before the stored loop was measured
+        return "stored loop not measured"
+    return "yes" if stored >= target and compile_s <= 1.5 else "no"
+
+
 def summary_table(result: dict[str, Any]) -> str:
     """The issue's comparison: every robot's float64 Jacobian (arms and the chain: the tip,
     world-aligned; humanoids: each case) against Pinocchio's stored and unstored loops measured
     beside it, compile time and the targets (>= 3x for arms and chains, >= 2x for
-    humanoids, against the stored loop; compile <= 1.5 s)."""
+    humanoids, against the stored loop; compile <= 1.5 s); then the same N written into a
+    preallocated array by ``jk.batch.chunked_map`` (:data:`CHUNKED`), against the stored loop
+    measured beside that row."""
     rows, lines = result["rows"], []
     for robot, info in result["robots"].items():
         quantities = list(info.get("cases", {})) if free_flyer(info) else ["geometric"]
@@ -206,10 +234,17 @@ def summary_table(result: dict[str, Any]) -> str:
             target = 2.0 if free_flyer(info) else 3.0
             stored = r.get("ratio_vs_pin_stored", math.nan)
             comp = r.get("lower_s", math.nan) + r.get("compile_s", math.nan)
-            if math.isnan(stored):  # a run from before the stored loop was measured
-                met = "stored loop not measured"
-            else:
-                met = "yes" if stored >= target and comp <= 1.5 else "no"
+            c = _summary_row(rows, robot, quantity, CHUNKED)
+            chunked = ["", "", ""]
+            met = f"jit(vmap): {_verdict(stored, comp, target)}"
+            if c is not None and c["n"] == r["n"]:
+                c_stored = c.get("ratio_vs_pin_stored", math.nan)
+                chunked = [
+                    f"{fmt_rate(c['per_s'])}/s",
+                    f"{c_stored:.2f}x",
+                    f"{c['chunk_compile_s']:.2f} s",
+                ]
+                met += f"; chunked_map: {_verdict(c_stored, c['chunk_compile_s'], target)}"
             lines.append(
                 [
                     robot,
@@ -221,6 +256,7 @@ def summary_table(result: dict[str, Any]) -> str:
                     f"{fmt_rate(r['pin_per_s'])}/s" if "pin_per_s" in r else "",
                     f"{r.get('ratio_vs_pin', math.nan):.2f}x",
                     f"{comp:.2f} s",
+                    *chunked,
                     f">= {target:g}x, <= 1.5 s: {met}",
                 ]
             )
@@ -234,9 +270,12 @@ def summary_table(result: dict[str, Any]) -> str:
         "Pinocchio unstored",
         "ratio",
         "lower + compile",
+        "jaxkin chunked_map into an array",
+        "ratio to stored",
+        "compile",
         "target",
     ]
-    return markdown_table(header, lines, "lllrrrrrrl")
+    return markdown_table(header, lines, "lllrrrrrrrrrl")
 
 
 def _has_single(rows: Rows) -> bool:
@@ -321,7 +360,7 @@ def _profile_n(rows: Rows) -> int:
     return 100_000 if 100_000 in ns else (ns[-1] if ns else 0)
 
 
-def profile_table(rows: Rows) -> str:
+def profile_table(rows: Rows, fault_us: float | None = None) -> str:
     n = _profile_n(rows)
     intro = (
         f"Optimised HLO of each batched kernel at N = {fmt_n(n)}: loop fusions (each one pass "
@@ -330,7 +369,11 @@ def profile_table(rows: Rows) -> str:
         "nothing into one of more than 8 operands), sin + cos ops compiled vs emitted by "
         "jaxkin (for the scan path: in the loop body, i.e. per joint step), and the compiled "
         "kernel's temporaries against its input + output per configuration (XLA's memory "
-        "analysis)."
+        "analysis); then the page faults of one call (first writes to newly allocated pages: "
+        "XLA allocates each call's output and temporaries anew), and the bytes so paged in per "
+        "configuration (4 KiB a fault; filling a new page cost "
+        + (f"{fault_us:.2f} us" if fault_us else "?")
+        + " more than refilling one already in memory, measured at the start of the run)."
     )
     lines = []
     for r in rows:
@@ -350,6 +393,7 @@ def profile_table(rows: Rows) -> str:
                 f"{h.get('sincos_compiled', '')} / {h.get('sincos_emitted', '')}",
                 f"{h.get('temp_bytes_per_config', math.nan):.0f}",
                 f"{h.get('io_bytes_per_config', math.nan):.0f}",
+                *_fault_cells(r),
                 rate,
             ]
         )
@@ -364,9 +408,19 @@ def profile_table(rows: Rows) -> str:
         "sin+cos compiled / emitted",
         "temp bytes / config",
         "in + out bytes / config",
+        "page faults / call",
+        "paged-in bytes / config",
         "rate",
     ]
-    return intro + "\n\n" + markdown_table(header, lines, "lll" + "r" * 8)
+    return intro + "\n\n" + markdown_table(header, lines, "lll" + "r" * 10)
+
+
+def _fault_cells(row: dict[str, Any]) -> list[str]:
+    """Page faults per call and the bytes they page in per configuration (4 KiB pages)."""
+    faults = row.get("page_faults_per_call")
+    if faults is None:
+        return ["", ""]
+    return [f"{faults:,.0f}", f"{faults * 4096 / row['n']:,.0f}"]
 
 
 # ---------------------------------------------------------------------------- prose
@@ -411,6 +465,13 @@ def headline(result: dict[str, Any]) -> str:
     )
     if r32 is not None:
         parts.append(f", and **{fmt_rate(r32['per_s'])}/s in float32**{_ratios(r32)}")
+    c = _find(rows, dtype="float64", **dict(where, impl=CHUNKED))
+    if c is not None and "ratio_vs_pin_stored" in c:
+        parts.append(
+            f"; written into a preallocated array by `jk.batch.chunked_map`, **"
+            f"{fmt_rate(c['per_s'])}/s in float64, {c['ratio_vs_pin_stored']:.2f}x the stored "
+            "loop** beside it"
+        )
     s = _find(rows, robot=h["robot"], impl="jaxkin single", dtype="float64")
     if s is not None:
         parts.append(
@@ -531,7 +592,12 @@ SUMMARY_NOTE = (
     "for several frames `computeJointJacobians` + `updateFramePlacements` + one "
     '`getFrameJacobian` per frame), "unstored" the same loop dropping its results. Ratios '
     "are against the stored loop first; the targets are issue 24's. Compile: `lower` + "
-    "`compile` of that batch shape."
+    '`compile` of that batch shape. "jaxkin chunked_map into an array": the same N '
+    "through `jk.batch.chunked_map(f, q, out=out)` with the library's default chunks, the "
+    "results written into a preallocated numpy array as the stored loop writes them (each "
+    "chunk's results over an earlier chunk's device buffers, so no call pages in new memory); "
+    "its ratio is against the stored loop measured beside that row, its compile the trace, "
+    "lowering and compile of the first call (`MapStats.compile_seconds`)."
 )
 QUICK_NOTE = (
     "**This is a `--quick` smoke run (small N, 2 repeats, possibly a loaded machine): "
@@ -624,7 +690,7 @@ def results_markdown(result: dict[str, Any]) -> str:
         "",
         "### Profile of the compiled kernels",
         "",
-        profile_table(rows),
+        profile_table(rows, result.get("page_fault_us")),
         "",
         "### Distance from the machine limits",
         "",
@@ -662,7 +728,7 @@ def print_tables(result: dict[str, Any], out_path: Path) -> None:
     print("\n### Compile times\n")
     print(compile_table(result["rows"]))
     print("\n### Profile\n")
-    print(profile_table(result["rows"]))
+    print(profile_table(result["rows"], result.get("page_fault_us")))
     lim = limits(result)
     if lim:
         print("\n### Machine limits\n")

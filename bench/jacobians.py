@@ -65,6 +65,8 @@ from .report import (
     log,
     machine_info,
     median,
+    page_fault_us,
+    page_faults,
     timed,
     write_json,
 )
@@ -213,6 +215,21 @@ def _progress(row: dict[str, Any]) -> None:
     log(f"{what}: {comp}{fmt_rate(row['per_s'])}/s{ratio}, diff {diff:.1e}")
 
 
+def faults_per_call(call: Callable[[], Any], calls: int = 3) -> float:
+    """Page faults (first writes to new pages) per ``call()``, over ``calls`` calls after one
+    warm-up: for a jitted kernel, its output and temporaries paged in anew on every call."""
+    call()
+    before = page_faults()
+    for _ in range(calls):
+        call()
+    return (page_faults() - before) / calls
+
+
+CHUNKED_FROM_N = 10_000
+"""``jk.batch.chunked_map`` rows are measured from this N up (below it one chunk is the whole
+batch: the ``jit(vmap)`` row plus a copy)."""
+
+
 def _too_slow(per_config: float | None, n: int, cfg: dict[str, Any]) -> str | None:
     """The skip status of an N whose call, predicted from the last rate, would be too long."""
     if per_config is None or per_config * n <= cfg["max_call_s"]:
@@ -312,6 +329,41 @@ class Bench:
         check(row, got, want(k), "Pinocchio")
         if row["status"] == "ok":
             row.update(self.samples(lambda: jax.block_until_ready(fn(*args)), n, ref))
+            row["page_faults_per_call"] = faults_per_call(lambda: jax.block_until_ready(fn(*args)))
+
+    def chunked_rows(self, robot: str, quantity: str, f, q_pool: np.ndarray, want, ref) -> None:
+        """``jk.batch.chunked_map(f, q, out=out)`` (float64, default chunks) for every N >=
+        :data:`CHUNKED_FROM_N`: the N results written into a preallocated numpy array, as
+        Pinocchio's stored loop writes them. The first call (trace, compile, run) is timed
+        apart (``first_call_s``; ``chunk_compile_s`` from its stats) and its results allocate
+        ``out``, which every later call fills again; ``want(q, k)`` is Pinocchio's first ``k``
+        answers for configurations ``q``."""
+        cfg, per_config = self.cfg, None
+        for n in (n for n in cfg["ns"] if n >= CHUNKED_FROM_N):
+            row = _row(robot, "jaxkin chunked_map", quantity, "float64", n)
+            q = q_pool[:n]
+            out_bytes = n * math.prod(jax.eval_shape(f, q[0]).shape) * 8
+            row["status"] = _too_slow(per_config, n, cfg) or "ok"
+            if out_bytes > cfg["mem_limit"]:
+                limit = cfg["mem_limit"] / 1e9
+                row["status"] = f"skipped: the results take {out_bytes / 1e9:.1f} GB > {limit:g} GB"
+            if row["status"] == "ok":
+                (out, stats), row["first_call_s"] = timed(
+                    lambda q=q: jk.batch.chunked_map(f, q, return_stats=True)
+                )
+                row.update(chunk_size=stats.chunk_size, chunk_compile_s=stats.compile_seconds)
+                k = min(n, cfg["check"])
+                check(row, out[:k], want(q, k), "Pinocchio")
+            if row["status"] == "ok":
+
+                def call(q=q, out=out):
+                    jk.batch.chunked_map(f, q, out=out)
+
+                row.update(self.samples(call, n, ref))
+                row["page_faults_per_call"] = faults_per_call(call)
+                per_config = median(row["samples_s"])
+                del out
+            self.add(row)
 
 
 class RobotBench(Bench):
@@ -380,6 +432,15 @@ class RobotBench(Bench):
                             per_config = median(row["samples_s"])
                     self.add(row)
                 del fn
+                if (quantity, dtype) == ("geometric", "float64"):
+                    self.chunked_rows(
+                        self.src.name,
+                        quantity,
+                        lambda q, robot=robot: jk.geometric_jacobian(robot, q),
+                        self.q_pool,
+                        lambda q, k: _pin_values(self.pin, "geometric", q[:k], None),
+                        ref,
+                    )
                 jax.clear_caches()
 
     def _jaxkin_row(self, row, fn, ref) -> None:
@@ -585,6 +646,14 @@ class FreeFlyerBench(Bench):
                     per_config = median(row["samples_s"])
             self.add(row)
         del fn
+        self.chunked_rows(
+            self.src.name,
+            case.quantity,
+            lambda q: jk.geometric_jacobian(robot, q, frame=frame, reference=case.reference),
+            self.q_pool,
+            lambda q, k: pin.jacobians(q[:k]),
+            ref,
+        )
 
 
 def dispatch_floor_s(cfg: dict[str, Any]) -> float:
@@ -627,6 +696,7 @@ def measure(cfg: dict[str, Any], args: argparse.Namespace, out_name: str) -> dic
     load_before = os.getloadavg()
     machine = machine_info()  # before any peer changes torch's thread count
     floor = dispatch_floor_s(cfg)
+    fault_us = page_fault_us()
     rows: list[dict[str, Any]] = []
     robots: dict[str, Any] = {}
     names = [x for x in args.robots.split(",") if x] or None
@@ -656,6 +726,7 @@ def measure(cfg: dict[str, Any], args: argparse.Namespace, out_name: str) -> dic
         machine=machine,
         load_average_1_5_15min=dict(before=load_before, after=os.getloadavg()),
         dispatch_floor_us=floor * 1e6,
+        page_fault_us=fault_us,
         robots=robots,
         elapsed_s=time.perf_counter() - t_start,
         json_name=out_name,
