@@ -44,8 +44,9 @@ def _strong_float(x: Scalar) -> bool:
 
 
 def _alike(a: Scalar, b: Scalar) -> bool:
-    """Both concrete, of one dtype and shape: ``lax`` takes them as they are."""
-    return _concrete(a) and _concrete(b) and a.dtype == b.dtype and a.shape == b.shape
+    """Both strongly typed floating JAX values (concrete or traced) of one dtype and shape:
+    ``lax`` takes them as they are."""
+    return _strong_float(a) and _strong_float(b) and a.dtype == b.dtype and a.shape == b.shape
 
 
 # Op by op, ``jnp``'s operators promote their arguments (and a Python constant through one
@@ -99,7 +100,7 @@ def add(*terms: Scalar) -> Scalar:
 
 
 def neg(a: Scalar) -> Scalar:
-    return lax.neg(a) if _concrete(a) else -a
+    return lax.neg(a) if _strong_float(a) else -a
 
 
 def sub(a: Scalar, b: Scalar) -> Scalar:
