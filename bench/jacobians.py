@@ -7,6 +7,11 @@ For each robot (see :mod:`bench.peers`), quantity and dtype:
   (tip, world-aligned), ``jk.analytical_jacobian(robot, q, "rpy", return_margin=True)`` and
   ``jk.twist(robot, q, qd)``, for N = 1, 100, 10k, 100k, 1M; compile apart (``lower`` and
   ``compile`` timed), the optimised HLO profiled (fusions, loops, sin/cos, temporaries);
+* jaxkin, into a preallocated array (float64 geometric Jacobians, N >= :data:`CHUNKED_FROM_N`):
+  ``jk.batch.chunked_map(f, q, out=out)`` with its default chunks (:meth:`Bench.chunked_rows`),
+  the comparison with Pinocchio's stored loop on equal terms;
+* page faults per call of every jaxkin row (:func:`faults_per_call`), and what one costs on
+  this machine (``bench.report.page_fault_us``, once per run);
 * jaxkin, one configuration from Python: ``jax.jit(lambda q: jk.geometric_jacobian(robot, q))(q)``;
 * peers (geometric Jacobian): pytorch_kinematics batched (float32, float64), MuJoCo (a Python
   loop, and ``mujoco.batch.Batch``), Robotics Toolbox ETS (a Python loop); Python loops time
