@@ -139,3 +139,26 @@ def test_summary_table_gives_both_ratios_and_the_issue_targets():
     assert lines[2].endswith("stored loop not measured |")
     table = R.case_table(result["rows"], "talos")
     assert "1.00 M (2.50x / 1.25x)" in table and "400.0 k/s" in table and "800.0 k/s" in table
+
+
+def test_chunked_rows_and_page_faults_are_reported_beside_the_jit_vmap_row():
+    # A chunked_map row (the N results into a preallocated array) is judged against the stored
+    # loop measured beside it, with its own compile; page faults appear in the profile.
+    chunked = _row("g1", "feet + hands", 3e5, stored=1e5, unstored=2e5)
+    chunked.update(impl=R.CHUNKED, chunk_compile_s=3.6, chunk_size=1248)
+    vmapped = _row("g1", "feet + hands", 1.5e5, stored=1e5, unstored=2e5)
+    vmapped.update(page_faults_per_call=250_000.0, hlo=dict(fusions=48))
+    result = dict(
+        robots=dict(g1=dict(floating_base=True, cases={"feet + hands": {}})),
+        rows=[vmapped, chunked],
+    )
+    (line,) = R.summary_table(result).splitlines()[2:]
+    assert "| 1.50x |" in line and "| 300.0 k/s | 3.00x | 3.60 s |" in line
+    assert line.endswith("jit(vmap): no; chunked_map: no |")  # compiles over 1.5 s
+    table = R.case_table(result["rows"], "g1").splitlines()
+    assert "| jit(vmap) | 150.0 k (1.50x / 0.75x) |" in table[2]
+    assert "| chunked_map into an array | 300.0 k (3.00x / 1.50x) |" in table[3]
+    assert "| 3.60 |" in table[3] and "| 0.80 |" in table[2]  # compile: its own, lower + compile
+    profile = R.profile_table(result["rows"], 2.4)
+    assert "2.40 us" in profile
+    assert "| 250,000 | 10,240 | 150.0 k/s |" in profile  # faults per call, bytes per config
