@@ -18,8 +18,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ._traces import is_tracer
-
 Scalar = Any  # float | jax.Array (0-d)
 Vec = tuple  # (Scalar, Scalar, Scalar)
 Mat = tuple  # ((Scalar,) * 3,) * 3
@@ -27,14 +25,6 @@ Mat = tuple  # ((Scalar,) * 3,) * 3
 
 def is_const(x: Scalar) -> bool:
     return isinstance(x, float)
-
-
-def _concrete(x: Scalar) -> bool:
-    """A strongly typed floating JAX array outside any trace: run op by op
-    (``jax.disable_jit()``)."""
-    return (
-        isinstance(x, jax.Array) and not is_tracer(x) and not x.weak_type and x.dtype.kind in "fc"
-    )
 
 
 def _strong_float(x: Scalar) -> bool:
@@ -49,13 +39,13 @@ def _alike(a: Scalar, b: Scalar) -> bool:
     return _strong_float(a) and _strong_float(b) and a.dtype == b.dtype and a.shape == b.shape
 
 
-# Op by op, ``jnp``'s operators promote their arguments (and a Python constant through one
-# more dispatch, a conversion) before the primitive runs: for operands already alike, ``lax``
-# runs the same primitive on them directly, about a third less time per operation (the same
-# values). A Python constant beside a strongly typed float is cast to its dtype here, concrete
-# or traced (under an eager ``jacfwd`` or ``vmap`` that saves one conversion dispatched per
-# operation; staged, the lowered programs are the same text as through ``jnp``). Other traced
-# operands keep ``jnp``'s operators.
+# ``jnp``'s operators promote their arguments (and a Python constant through one more dispatch, a
+# conversion) before the primitive runs, and each is a jitted function: op by op a dispatch,
+# while tracing a pass through jit's machinery per operation. For operands already alike
+# (concrete or traced), ``lax`` runs the same primitive on them directly: op by op about a third
+# less time per operation, a vmapped trace of a humanoid hand's Jacobian 0.23 -> 0.15 s, the same
+# values and the same lowered programs. A Python constant beside a strongly typed float is cast to
+# its dtype here. Other operands (weakly typed, mixed dtypes or shapes) keep ``jnp``'s operators.
 def _times(a: Scalar, b: Scalar) -> Scalar:
     if is_const(b) and _strong_float(a):
         return lax.mul(a, np.asarray(b, a.dtype))

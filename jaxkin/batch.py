@@ -71,7 +71,7 @@ CHUNK_RESULT_BYTES = 8 * 2**20
 """On CPUs, :func:`chunked_map`'s default chunk holds about this many bytes of results. Each
 call of a compiled chunk allocates its intermediates anew; once a chunk's intermediates are
 tens of MiB the allocator returns them to the operating system between calls and every call
-pages them in again (4 KiB page faults, ~2 us each here). Measured on a 2-core EPYC, float64,
+pages them in again (4 KiB page faults, ~2.5 us each here). Measured on a 2-core EPYC, float64,
 100,000 geometric Jacobians into a preallocated array: 8 MiB chunks ran the 32-joint chain at
 368-504 k/s, Talos's hand at 656-805 k/s and the G1's four frames at 150-164 k/s, against
 253-285, 389-412 and 100-108 k/s for the former default (two chunks of 50,000 rows); the Panda
