@@ -136,6 +136,23 @@ def test_chunks_are_written_over_drained_results():
     )
 
 
+def test_humanoid_jacobians_chunked_equal_one_jit_vmap_call():
+    # The fast path for N results in an array (default chunks, each written over an earlier
+    # chunk's buffers) against one jax.jit(jax.vmap(...)) of the same function: a floating-base
+    # robot, four frames in one call, three chunks (the third reuses the first one's buffers).
+    robot = jk.robots.load("erd/solo12", floating_base=True, dtype=np.float64)
+    feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+
+    def fn(q):
+        return jk.geometric_jacobian(robot, q, frame=feet)
+
+    q = np.asarray(jk.sample_configurations(robot, 5000, jax.random.key(3)))
+    got, stats = chunked_map(fn, q, return_stats=True)
+    assert stats.n_chunks == 3  # 8 MiB / (4 * 6 * 18 * 8 bytes) = 2,427 rows at most
+    want = np.asarray(jax.jit(jax.vmap(fn))(q))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
 def test_a_sink_that_keeps_its_chunks_keeps_them_intact():
     # A sink receives numpy views of the device results; JAX does not donate a buffer that a
     # view still refers to, so later chunks never overwrite what the sink kept.
