@@ -292,17 +292,19 @@ def chunked_map(
         with _target(out, traced.out_info, n) as (results, put):
             if n_chunks:
                 bar.note(f"compiling for chunks of {chunk:,} rows ...")
-                compiled, reuse = _compile_into(fn, mesh, traced)
+                into = _compile_into(fn, mesh, traced)
             compile_seconds = time.perf_counter() - t0
             bar.start()
             t0 = time.perf_counter()
-            spare: list[Any] = []  # drained chunks' device results, written over by later chunks
+            if n_chunks:
 
-            def launch(start: int) -> Any:
-                buffers = spare.pop() if spare else _blank(reuse)
-                return compiled(buffers, *_feed(host, start, chunk, n, mesh))
+                def launch(start: int) -> Any:
+                    return into.compiled(into.buffers(), *_feed(host, start, chunk, n, mesh))
 
-            _pipelined(n, chunk, n_chunks, launch, put, bar, recycle=spare.append)
+                try:
+                    _pipelined(n, chunk, n_chunks, launch, put, bar, recycle=into.recycle)
+                finally:
+                    into.settle()
     finally:
         bar.close()
     run_seconds = time.perf_counter() - t0
@@ -761,22 +763,56 @@ def _mapped(fn: Callable[..., Any], mesh: Mesh) -> Any:
 
 
 _into_cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-"""Per :func:`_mapped` object (dropped with it), :func:`_compile_into`'s executables by input
+"""Per :func:`_mapped` object (dropped with it), :func:`_compile_into`'s programs by input
 shapes."""
 
+SPARE_BYTES = 2 * CHUNK_RESULT_BYTES
+"""On CPUs, a program's drained result buffers of at most this many bytes (per set) are kept
+between :func:`chunked_map` calls (two sets), so the next call's first chunks write over them
+instead of over newly allocated, zeroed memory."""
 
-def _compile_into(fn: Callable[..., Any], mesh: Mesh, traced: jax.stages.Traced) -> tuple[Any, Any]:
-    """``(compiled, reuse)``: an executable computing what ``traced`` (from :func:`_trace`)
-    computes, called as ``compiled(reuse_buffers, *chunk arrays)``, that writes its results over
-    ``reuse_buffers`` (donated: arrays shaped as the outputs; ``reuse`` are their specs).
+
+class _Into:
+    """A compiled chunk program that writes its results over donated buffers
+    (:func:`_compile_into`), with the pool of drained result buffers its chunks write over."""
+
+    def __init__(self, compiled: Any, reuse: Any, keep: bool) -> None:
+        self.compiled = compiled
+        self.reuse = reuse  # specs of the buffers (the outputs' shapes, dtypes and sharding)
+        self.keep = keep  # whether the pool outlives a call
+        self.spare: list[Any] = []
+
+    def buffers(self) -> Any:
+        """A drained chunk's results to write over, or new (zeroed) buffers."""
+        try:
+            return self.spare.pop()
+        except IndexError:
+            return _blank(self.reuse)
+
+    def recycle(self, results: Any) -> None:
+        """Keep a drained chunk's device results for a later chunk (at most two sets)."""
+        if len(self.spare) < 2:
+            self.spare.append(results)
+
+    def settle(self) -> None:
+        """At the end of a call: release the pool unless it is kept between calls."""
+        if not self.keep:
+            self.spare.clear()
+
+
+def _compile_into(fn: Callable[..., Any], mesh: Mesh, traced: jax.stages.Traced) -> _Into:
+    """An executable computing what ``traced`` (from :func:`_trace`) computes, called as
+    ``compiled(buffers, *chunk arrays)``, that writes its results over ``buffers`` (donated:
+    arrays shaped as the outputs), with its pool of buffers (:class:`_Into`).
 
     Why: every call of a compiled program returns its results in newly allocated memory, and
     the operating system hands out new memory a 4 KiB page at a time, the first write to each
     page a fault that costs about as much as computing a few Jacobian entries. Chunk after
     chunk, :func:`chunked_map` passes a drained chunk's device results back as the buffers to
-    write over, so results land in memory already paged in. JAX donates a buffer only while
-    nothing else refers to it: a numpy view that a sink kept makes it allocate afresh, never
-    overwrite the view.
+    write over, so results land in memory already paged in; on CPUs, when a set is small
+    (:data:`SPARE_BYTES`), the last two are kept for the next call. JAX donates a buffer only
+    while nothing else refers to it: a numpy view that a sink kept makes it allocate afresh,
+    never overwrite the view.
 
     The program replays ``traced``'s jaxpr (no second trace of ``fn``; calling the ``jax.jit``
     object instead would nest it, which XLA compiles into a different, slower program). Kept
@@ -803,7 +839,12 @@ def _compile_into(fn: Callable[..., Any], mesh: Mesh, traced: jax.stages.Traced)
         )
         specs = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=sharding) for a in inputs]
         compiled = into.trace(reuse, *specs).lower().compile(compiler_options() or None)
-        cached[key] = (compiled, reuse)
+        nbytes = sum(
+            math.prod(s.shape) * np.dtype(s.dtype).itemsize
+            for s in jax.tree_util.tree_leaves(reuse)
+        )
+        on_cpu = all(d.platform == "cpu" for d in mesh.devices.flat)
+        cached[key] = _Into(compiled, reuse, keep=on_cpu and nbytes <= SPARE_BYTES)
     return cached[key]
 
 
@@ -891,6 +932,8 @@ def _pipelined(
     if pending is not None:
         _drain(put, *pending)
         bar.update(pending[1] - pending[0])
+        if recycle is not None:
+            recycle(pending[2])
 
 
 def _drain(put: Callable[..., None], start: int, stop: int, device_out: Any) -> None:

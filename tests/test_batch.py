@@ -122,11 +122,11 @@ def test_chunks_are_written_over_drained_results():
     host, _ = batch._check_inputs((x, y))
     mesh = batch._mesh(None)
     traced = batch._trace(row_fn, host, 4, mesh)
-    compiled, reuse = batch._compile_into(row_fn, mesh, traced)
-    assert jax.tree_util.tree_structure(reuse) == jax.tree_util.tree_structure(traced.out_info)
-    assert "input_output_alias" in compiled.as_text()
-    buffers = batch._blank(reuse)
-    first = compiled(buffers, *batch._feed(host, 0, 4, 12, mesh))
+    into = batch._compile_into(row_fn, mesh, traced)
+    assert jax.tree_util.tree_structure(into.reuse) == jax.tree_util.tree_structure(traced.out_info)
+    assert "input_output_alias" in into.compiled.as_text()
+    buffers = batch._blank(into.reuse)
+    first = into.compiled(buffers, *batch._feed(host, 0, 4, 12, mesh))
     assert all(b.is_deleted() for b in jax.tree_util.tree_leaves(buffers))  # donated
     assert_tree_equal(
         jax.tree_util.tree_map(np.asarray, first),
@@ -151,6 +151,30 @@ def test_humanoid_jacobians_chunked_equal_one_jit_vmap_call():
     assert stats.n_chunks == 3  # 8 MiB / (4 * 6 * 18 * 8 bytes) = 2,427 rows at most
     want = np.asarray(jax.jit(jax.vmap(fn))(q))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_small_result_buffers_are_kept_for_the_next_call_and_large_ones_released(monkeypatch):
+    # On a CPU the last two drained buffer sets stay with the program when a set is small, so
+    # the next call's first chunks write over them (not over new zeroed memory); large sets go.
+    from jaxkin import batch
+
+    def small(x):
+        return x * 2.0
+
+    def large(x):
+        return x * 3.0
+
+    x = np.arange(40.0)[:, None]
+    mesh = batch._mesh(None)
+    host, _ = batch._check_inputs((x,))
+    for fn, limit, kept in ((small, batch.SPARE_BYTES, 2), (large, 79, 0)):  # a set: 80 bytes
+        monkeypatch.setattr(batch, "SPARE_BYTES", limit)
+        np.testing.assert_array_equal(chunked_map(fn, x, chunk_size=10), np.asarray(fn(x)))
+        into = batch._compile_into(fn, mesh, batch._trace(fn, host, 10, mesh))  # cached
+        assert len(into.spare) == kept
+        pool = list(into.spare)
+        np.testing.assert_array_equal(chunked_map(fn, x, chunk_size=10), np.asarray(fn(x)))
+        assert all(leaf.is_deleted() for tree in pool for leaf in jax.tree_util.tree_leaves(tree))
 
 
 def test_a_sink_that_keeps_its_chunks_keeps_them_intact():
