@@ -347,7 +347,8 @@ class Bench:
         for n in (n for n in cfg["ns"] if n >= CHUNKED_FROM_N):
             row = _row(robot, "jaxkin chunked_map", quantity, "float64", n)
             q = q_pool[:n]
-            out_bytes = n * math.prod(jax.eval_shape(f, q[0]).shape) * 8
+            spec = jax.eval_shape(f, q[0])
+            out_bytes = n * math.prod(spec.shape) * np.dtype(spec.dtype).itemsize
             row["status"] = _too_slow(per_config, n, cfg) or "ok"
             if out_bytes > cfg["mem_limit"]:
                 limit = cfg["mem_limit"] / 1e9

@@ -69,13 +69,13 @@ DEFAULT_CHUNK_SIZE = 65536
 
 CHUNK_RESULT_BYTES = 8 * 2**20
 """On CPUs, :func:`chunked_map`'s default chunk holds about this many bytes of results. Each
-call of a compiled chunk allocates its intermediates anew; once a chunk's intermediates are
-tens of MiB the allocator returns them to the operating system between calls and every call
-pages them in again (4 KiB page faults, ~2.5 us each here). Measured on a 2-core EPYC, float64,
-100,000 geometric Jacobians into a preallocated array: 8 MiB chunks ran the 32-joint chain at
-368-504 k/s, Talos's hand at 656-805 k/s and the G1's four frames at 150-164 k/s, against
-253-285, 389-412 and 100-108 k/s for the former default (two chunks of 50,000 rows); the Panda
-and the UR5 within run-to-run noise either way."""
+call of a compiled chunk allocates its intermediates anew; once they pass glibc's 32 MiB limit
+for reusing freed memory, every call pages them in again (4 KiB page faults, ~2.2-2.6 us each
+here). ``python3 -m bench`` measures the result (its ``jaxkin chunked_map`` rows against one
+``jit(vmap)`` call, bench/README.md): at N = 100,000, 1.3-2.0x faster for the 32-joint chain,
+the G1's four frames, the Panda and a Talos hand. The size itself came from a one-off sweep
+(not in the repository) of 4, 8 and 16 MiB on those robots, where 8 MiB was best or within
+the ~20% run-to-run noise of the best."""
 
 MIN_AUTO_CHUNK = 1024
 """The smallest chunk :func:`chunked_map` picks by itself (per-call overhead bounds it)."""
