@@ -14,6 +14,11 @@ frame within 1e-6 m and 1e-6 rad of its target (and, separately, when the solver
 * ``talos``: Talos (reduced, 32 joints): both soles and both grippers;
 * ``solo12``: Solo12 (12 joints): the four feet.
 
+Also per robot: the share of targets whose first start (``q0``) converged, and of the others the
+share whose first random restart converged (read from ``sol.seed``: the answer is the first
+converging start in order), which is how good the restarts' rule is (``jaxkin.ik._start_fn``,
+``_aligned_starts``).
+
 Timed: the first call (trace + compile + solve) and the median of ``--repeats`` later calls
 (steady state); time per target = steady / N. Prints a markdown table with the machine and the
 load (``os.getloadavg``), and writes ``results/wholebody_ik.json``.
@@ -99,6 +104,11 @@ def run_robot(name: str, n: int, repeats: int) -> dict:
     ep, eo = frame_errors(robot, np.asarray(sol.q), T, frames)
     solved = is_solved(ep, eo)
     steps = np.asarray(sol.steps)
+    seed, conv = np.asarray(sol.seed), np.asarray(sol.converged)
+    first = conv & (seed == 0)  # q0 converged
+    # the answer is the first converging start in order: among the targets q0 missed, start 1
+    # (the first restart) converged exactly where it is the answer
+    restart = conv & (seed == 1)
     return {
         "robot": name,
         "file": path,
@@ -109,6 +119,9 @@ def run_robot(name: str, n: int, repeats: int) -> dict:
         "solved": float(np.mean(solved)),
         "converged": float(np.mean(np.asarray(sol.converged))),
         "results": np.bincount(np.asarray(sol.result), minlength=5).tolist(),
+        "first_start_converged": float(np.mean(first)),
+        "first_restart_converged": float(np.sum(restart) / max(1, np.sum(~first))),
+        "steps_mean": float(np.mean(steps)),
         "steps_median": float(np.median(steps)),
         "steps_max": int(steps.max()),
         "starts_max": int(np.asarray(sol.seed).max()) + 1,
@@ -135,7 +148,9 @@ def main(argv: list[str] | None = None) -> None:
         "targets",
         "solved (1e-6 m, rad)",
         "converged",
-        "median steps",
+        "q0 converged",
+        "first restart converged (of the rest)",
+        "mean / median steps",
         "most starts",
         "first call (s)",
         "per target (ms)",
@@ -148,14 +163,16 @@ def main(argv: list[str] | None = None) -> None:
                 str(r["n"]),
                 f"{100 * r['solved']:.1f}%",
                 f"{100 * r['converged']:.1f}%",
-                f"{r['steps_median']:.0f}",
+                f"{100 * r['first_start_converged']:.1f}%",
+                f"{100 * r['first_restart_converged']:.1f}%",
+                f"{r['steps_mean']:.0f} / {r['steps_median']:.0f}",
                 str(r["starts_max"]),
                 f"{r['first_call_s']:.1f}",
                 f"{r['per_target_ms']:.2f}",
             ]
             for r in rows
         ],
-        "lrrrrrrr",
+        "lrrrrrrrrr",
     )
     cpu = ", ".join(info["cpu_model"])
     print(

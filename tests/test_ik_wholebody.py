@@ -16,11 +16,14 @@ from __future__ import annotations
 import functools
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from _legs import FEET, LEGS
 from _sampling import random_q  # numpy: the sampler is not under test here
 from _xla import FAST_COMPILE
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import jaxkin as jk
 from jaxkin.ik import RESULTS
@@ -105,6 +108,113 @@ def test_throw_raises_with_every_solution_kept():
     sol = on_host(info.value.solution)
     assert not sol.converged[0] and np.all(sol.converged[1:])
     assert sol.result[0] in (RESULTS.stalled, RESULTS.max_steps_reached)
+
+
+# ----------------------------------------------------------------------------- restarts
+def _rotation(v) -> np.ndarray:
+    """The rotation of the (non-zero) 4-vector ``v`` read as a quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(v) / np.linalg.norm(v)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+_quaternion = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(
+    lambda v: np.linalg.norm(v) > 0.1
+)
+_point = st.lists(st.floats(-1, 1), min_size=3, max_size=3).map(np.array)
+
+
+@functools.cache
+def _base_fit(k: int):
+    """``jaxkin.ik._base_fit`` jitted (one compile per number of frames)."""
+
+    def fit(R, p, T, w, i):
+        goal = jk.ik._Goals(T=T, com=None, q_ref=None, w=w, wp=None)
+        return jk.ik._base_fit(R, p, goal, i)
+
+    return jax.jit(fit, compiler_options=FAST_COMPILE)
+
+
+def _frames_and_targets(data, k: int, G: np.ndarray, t: np.ndarray):
+    """k random frame poses, and their targets moved rigidly by ``(G, t)``."""
+    R = np.stack([_rotation(data.draw(_quaternion)) for _ in range(k)])
+    p = np.stack([data.draw(_point) for _ in range(k)])
+    T = np.tile(np.eye(4), (k, 1, 1))
+    T[:, :3, :3] = G @ R
+    T[:, :3, 3] = p @ G.T + t
+    return R, p, T
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.sampled_from([1, 2, 4]), _quaternion, _point, st.data())
+def test_restart_base_fit_recovers_a_rigid_motion_of_the_frames(k, g, t, data):
+    """Targets that are the frames moved rigidly: the fit is that motion, whatever the number
+    of frames (one frame: its axes fix the rotation)."""
+    G = _rotation(g)
+    R, p, T = _frames_and_targets(data, k, G, t)
+    Rg, tg = _base_fit(k)(R, p, T, np.ones(6 * k), 0)
+    np.testing.assert_allclose(np.asarray(Rg), G, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(tg), t, atol=1e-9)
+
+
+@settings(max_examples=15, deadline=None)
+@given(_quaternion, _point, st.data())
+def test_restart_base_fit_without_position_rows_turns_about_the_frames_centroid(g, t, data):
+    G = _rotation(g)
+    R, p, T = _frames_and_targets(data, 4, G, t)
+    w = np.tile([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], 4)  # orientation rows only
+    Rg, tg = map(np.asarray, _base_fit(4)(R, p, T, w, 0))
+    np.testing.assert_allclose(Rg, G, atol=1e-9)
+    c = p.mean(axis=0)
+    np.testing.assert_allclose(Rg @ c + tg, c, atol=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 1), st.data())
+def test_restart_base_fit_falls_back_to_one_frame_where_the_fit_is_degenerate(i, data):
+    """Two frames, position rows only: their origins fix no rotation about the line through
+    them, so the fit is frame i's own alignment (onto a target that is no rigid motion)."""
+    R, p, _ = _frames_and_targets(data, 2, np.eye(3), np.zeros(3))
+    T = np.tile(np.eye(4), (2, 1, 1))
+    T[:, :3, :3] = np.stack([_rotation(data.draw(_quaternion)) for _ in range(2)])
+    T[:, :3, 3] = np.stack([data.draw(_point) for _ in range(2)])
+    w = np.tile([1.0, 1.0, 1.0, 0.0, 0.0, 0.0], 2)
+    Rg, tg = map(np.asarray, _base_fit(2)(R, p, T, w, i))
+    want = T[i, :3, :3] @ R[i].T
+    np.testing.assert_allclose(Rg, want, atol=1e-12)
+    np.testing.assert_allclose(tg, T[i, :3, 3] - want @ p[i], atol=1e-12)
+
+
+def test_restarts_of_a_floating_base_spread_from_mid_range():
+    """Start s > 0 of a floating-base whole-body solve: q0's base, each revolute and prismatic
+    joint at ``mid + a (row - mid)`` of its pool row, ``a = min(1, (s - 1) / RESTART_RAMP)``;
+    the pool row as drawn from then on and for a fixed-base robot (every start brought within
+    the limits: the Panda's neutral configuration is not)."""
+    ramp = jk.ik.RESTART_RAMP
+    for robot in (jk.robots.load("erd/solo12", floating_base=True), jk.robots.load("panda")):
+        S = ramp + 3
+        pool = jk.sample_configurations(robot, S - 1, key=5)
+        q0 = jk.neutral(robot)
+        start = jk.ik._start_fn(robot, q0, pool, 1, S, np.float64, keep_base=True)
+        lo, hi = (np.asarray(b) for b in jk.sampling_bounds(robot))
+        base = jk.ik._base_entries(robot)
+        for s in range(S):
+            got = np.asarray(start(jnp.int32(0), jnp.int32(s)))
+            if s == 0:
+                want = np.asarray(q0)
+            elif base is None:
+                want = np.asarray(pool[s - 1])
+            else:
+                a = min(1.0, (s - 1) / ramp)
+                mid = (lo + hi) / 2
+                want = np.where(base, q0, mid + a * (np.asarray(pool[s - 1]) - mid))
+            want = np.clip(want, robot.lower, robot.upper)
+            np.testing.assert_allclose(got, want, atol=1e-15, err_msg=f"{robot.name} start {s}")
 
 
 # ----------------------------------------------------------------------------- LEGS

@@ -68,6 +68,29 @@ def test_unrolled_cholesky_matches_lapack_and_flags_indefinite_matrices():
     assert all(np.isfinite(float(x)) for row in L for x in row if x is not None)
 
 
+def test_polar_rotation_matches_the_svd_and_flags_reflections_and_singular_matrices():
+    """The restarts' base fit (``jaxkin.ik``): the rotation nearest M, against numpy's SVD
+    (``U V^T``) on matrices of condition numbers up to 1e6 and any scale; flagged where
+    ``det M <= 1e-9 |M|_F^3``: a reflection (``det <= 0``), rank < 3, or nearly so."""
+    rng = np.random.default_rng(1)
+    n = 400
+    U = np.linalg.qr(rng.normal(size=(n, 3, 3)))[0]
+    V = np.linalg.qr(rng.normal(size=(n, 3, 3)))[0]
+    V[::3, :, 2] *= -1  # every third one a reflection: det M < 0
+    S = 10.0 ** rng.uniform(-6, 0, size=(n, 3))
+    S[:, 0] = 1.0
+    S[n // 2 :, 2] = 0.0  # rank 2
+    M = np.einsum("nij,nj,nkj->nik", U, S * 10.0 ** rng.uniform(-3, 3, size=(n, 1)), V)
+    R, ok = map(np.asarray, jax.jit(jax.vmap(_linalg.polar_rotation))(M))
+    margin = np.linalg.det(M) / np.linalg.norm(M, axis=(1, 2)) ** 3 / 1e-9
+    full = np.arange(n) < n // 2
+    clear = np.abs(margin - 1) > 0.01  # away from the threshold's rounding
+    assert np.all(ok[clear] == (margin[clear] > 1)) and not np.any(ok[~full])
+    assert np.sum(ok) > n // 4 and np.sum(full & (margin < 0)) > 10  # both kinds were drawn
+    want = np.einsum("nij,njk->nik", U, V.transpose(0, 2, 1))  # a rotation wherever ok
+    np.testing.assert_allclose(R[ok], want[ok], atol=1e-9)
+
+
 # --- item 5b: one kernel for the pose of a frame -----------------------------------------------
 def test_ik_and_analysis_take_a_frame_pose_from_its_kernel():
     """No ``fp.R[f]`` / ``fp.p[f]`` picked out of a full forward pass (calibration's residuals
