@@ -211,6 +211,41 @@ def _summary_row(
     return at[0] if at else max(sel, key=lambda r: r["n"])
 
 
+PATH_COSTS = (
+    # (robot, quantity, the row it is compared with, what the bar is)
+    ("talos", "hand, world-aligned", ("panda", "geometric"), "a 7-joint arm's"),
+    ("g1", "feet + hands, world-aligned", ("g1", "left hand, world-aligned"), "one frame's"),
+)
+"""The issue's bars on how a Jacobian's cost grows (each within 1.5x of the row it is compared
+with): a humanoid hand (9 joints and the free-flyer on its path, 15 of 38 columns) against the
+Panda's tip, and the G1's four end frames in one call against one of them alone."""
+
+
+def path_costs(rows: Rows) -> str:
+    """Per :data:`PATH_COSTS` pair, the time per Jacobian of the row against the one it is
+    compared with (float64, N = 100k or the largest N, through :data:`CHUNKED` and one
+    ``jit(vmap)`` call), as markdown lines; empty when the rows are missing."""
+    lines = []
+    for robot, quantity, (base_robot, base_quantity), what in PATH_COSTS:
+        cells = []
+        for impl, label in ((CHUNKED, "chunked_map"), ("jaxkin", "jit(vmap)")):
+            r = _summary_row(rows, robot, quantity, impl)
+            b = _summary_row(rows, base_robot, base_quantity, impl)
+            if r is None or b is None or r["n"] != b["n"]:
+                continue
+            cells.append(
+                f"{label} {b['per_s'] / r['per_s']:.2f}x ({fmt_rate(r['per_s'])}/s against "
+                f"{fmt_rate(b['per_s'])}/s, N = {fmt_n(r['n'])})"
+            )
+        if cells:
+            name = "tip" if base_quantity == "geometric" else base_quantity
+            lines.append(
+                f"- {robot} {quantity} against {base_robot} {name} ({what}; bar <= 1.5x): "
+                + "; ".join(cells)
+            )
+    return "\n".join(lines)
+
+
 def _verdict(stored: float, compile_s: float, target: float) -> str:
     if math.isnan(stored):  # a run from before the stored loop was measured
         return "stored loop not measured"
@@ -674,6 +709,9 @@ def results_markdown(result: dict[str, Any]) -> str:
         CELLS_NOTE,
         "",
     ]
+    costs = path_costs(rows)
+    if costs:
+        parts += ["### Cost with the support path (time per Jacobian, float64)", "", costs, ""]
     for name, info in result["robots"].items():
         parts += _robot_section(name, info, rows)
     if _has_single(rows):
@@ -716,6 +754,10 @@ def print_tables(result: dict[str, Any], out_path: Path) -> None:
     print(machine_line(result))
     print("\n### Against Pinocchio from Python (float64)\n")
     print(summary_table(result))
+    costs = path_costs(result["rows"])
+    if costs:
+        print("\n### Cost with the support path\n")
+        print(costs)
     for name, info in result["robots"].items():
         print(f"\n### {name}\n")
         if free_flyer(info):

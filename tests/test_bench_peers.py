@@ -162,3 +162,23 @@ def test_chunked_rows_and_page_faults_are_reported_beside_the_jit_vmap_row():
     profile = R.profile_table(result["rows"], 2.4)
     assert "2.40 us" in profile
     assert "| 250,000 | 10,240 | 150.0 k/s |" in profile  # faults per call, bytes per config
+
+
+def test_path_costs_compare_a_row_with_the_one_its_bar_names():
+    # The issue's bars on how the cost grows: a Talos hand against the Panda's tip, the G1's four
+    # frames against one; the time per Jacobian, through chunked_map and one jit(vmap) call.
+    rows = [
+        _row("panda", "geometric", 6e6, stored=1e6, unstored=2e6),
+        _row("talos", "hand, world-aligned", 1.5e6, stored=1e6, unstored=2e6),
+        _row("g1", "feet + hands, world-aligned", 3e5, stored=1e5, unstored=2e5),
+        _row("g1", "left hand, world-aligned", 9e5, stored=1e5, unstored=2e5),
+    ]
+    chunked = _row("panda", "geometric", 8e6, stored=1e6, unstored=2e6)
+    chunked.update(impl=R.CHUNKED, chunk_compile_s=0.2, chunk_size=20_000)
+    talos, g1 = R.path_costs([*rows, chunked]).splitlines()
+    assert talos.startswith("- talos hand, world-aligned against panda tip")
+    assert "jit(vmap) 4.00x (1.50 M/s against 6.00 M/s" in talos
+    assert "chunked_map" not in talos  # no chunked Talos row: that comparison is left out
+    assert "against g1 left hand, world-aligned (one frame's; bar <= 1.5x)" in g1
+    assert "jit(vmap) 3.00x (300.0 k/s against 900.0 k/s" in g1
+    assert R.path_costs(rows[:1]) == ""
