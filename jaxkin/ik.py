@@ -274,9 +274,9 @@ planar joints."""
 WHOLE_BODY_DEFAULTS = {"max_steps": 60, "damping": 1e-1}
 """``max_steps`` and ``damping`` of a whole-body solve (several frames, weights, ``com=``,
 ``posture=``, or free, ball or planar joints): a more cautious first step and twice the steps
-per start. On G1's hands and feet from the neutral configuration these reach 100% of 500
-targets (``bench.wholebody_ik``'s), where the arm defaults (1e-3, 30) reach 99.4% (95% of 200
-before the restarts' rule of :data:`RESTART_RAMP`)."""
+per start. On G1's hands and feet from the neutral configuration these reach 100% of
+``bench.wholebody_ik``'s 500 targets, where ``max_steps=30, damping=1e-3`` (the arm defaults)
+reach 99.4% (95% of 200 before the restarts' rule of :data:`RESTART_RAMP`)."""
 
 
 class _Lane(NamedTuple):
@@ -434,10 +434,32 @@ def _begin(lane: _Lane, free: jax.Array, job: jax.Array, seed: jax.Array) -> _La
     )
 
 
+START_SLOTS = 8
+"""Lanes whose new start :func:`_place` evaluates on their own in an iteration where at most
+this many (of more) lanes begin one; otherwise it evaluates every lane's."""
+
+
 def _place(lane: _Lane, begun: jax.Array, starts) -> _Lane:
     """The lanes ``begun`` (B,) by :func:`_begin` placed at their start's configuration
-    (``starts(job, seed)``): one evaluation of ``starts`` per iteration, inside the loop."""
-    q = starts(lane.job, lane.seed)
+    (``starts(job, seed)``, vmapped), inside the loop.
+
+    Usually a few lanes begin a start in an iteration (the first iteration: all of them); a
+    whole-body start is a forward pass and a base fit (about 2.5 us a lane for a G1), so where at
+    most :data:`START_SLOTS` lanes begin, only theirs are evaluated (gathered, then scattered
+    back), else every lane's. The same values either way."""
+    B = begun.shape[0]
+
+    def every():
+        return starts(lane.job, lane.seed)
+
+    def some():
+        ix = jnp.nonzero(begun, size=START_SLOTS, fill_value=0)[0]
+        return lane.q.at[ix].set(starts(lane.job[ix], lane.seed[ix]))
+
+    if B <= START_SLOTS:
+        q = every()
+    else:
+        q = jax.lax.cond(jnp.sum(begun) <= START_SLOTS, some, every)
     return lane._replace(
         q=jnp.where(begun[:, None], q, lane.q), best_q=jnp.where(begun[:, None], q, lane.best_q)
     )
@@ -971,8 +993,8 @@ RESTART_RAMP = 8
 """Restarts of a floating-base robot's whole-body solve draw each joint from the middle
 ``(s - 1) / RESTART_RAMP`` of its range (start ``s``; the whole range from ``s = 9`` on): the
 first restart at mid-range, later ones spread out (see :func:`_start_fn`). Of 2, 4, 8, 16 and 32,
-8 gave the least time per target over G1, Talos and Solo12 together (500 targets each, every
-value 100% solved; ``bench.wholebody_ik`` with this constant changed)."""
+8 gave the least time per target over G1, Talos and Solo12 together (``bench.wholebody_ik``'s
+500 targets each, solved with this constant changed; every value solved 100%)."""
 
 
 def _start_fn(robot, q0, pool, n, S, dtype, keep_base=True):

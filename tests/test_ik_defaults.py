@@ -151,6 +151,32 @@ def test_an_ik_error_keeps_the_batch():
     assert jk.IKError("plain").solution is None
 
 
+@pytest.mark.parametrize("n_begun", [0, 1, 5, jk.ik.START_SLOTS, jk.ik.START_SLOTS + 1, 20])
+def test_placing_starts_gathered_or_for_every_lane_gives_the_same_values(n_begun):
+    """``_place`` evaluates the starts of the lanes that begin one (gathered) where at most
+    ``START_SLOTS`` do, else every lane's: the lanes' configurations are the same either way, and
+    the lanes that do not begin keep theirs."""
+    B, n = 20, 3
+    rng = np.random.default_rng(n_begun)
+    begun = np.zeros(B, bool)
+    begun[rng.permutation(B)[:n_begun]] = True
+    q = rng.normal(size=(B, n))
+    lane = jk.ik._idle_lanes(B, n, 7, np.float64)._replace(
+        q=jnp.asarray(q), job=jnp.asarray(rng.integers(0, 7, B), jnp.int32)
+    )
+    calls = []
+
+    def starts(job, seed):  # vmapped: one row per lane given
+        calls.append(job.shape[0])
+        return jnp.stack([job * 1.0, seed * 2.0, job + 0.5], axis=1)
+
+    placed = jax.jit(lambda lane, begun: jk.ik._place(lane, begun, starts))(lane, begun)
+    want = np.where(begun[:, None], np.asarray(starts(lane.job, lane.seed)), q)
+    np.testing.assert_array_equal(np.asarray(placed.q), want)
+    np.testing.assert_array_equal(np.asarray(placed.best_q), np.where(begun[:, None], want, 0.0))
+    assert calls[:2] == [jk.ik.START_SLOTS, B]  # traced: the gathered branch and the full one
+
+
 def test_answers_do_not_depend_on_the_lanes():
     """The queue runs the last targets' remaining starts side by side (several lanes on one
     target); the answer is still the one of trying the starts in turn: the converged start
