@@ -53,10 +53,10 @@ uniformly within the limits are not. Defaults: ``damping=0.1`` and ``max_steps=6
 reachable targets (``jk.fk`` of configurations drawn by ``jk.sample_configurations``: the base
 anywhere in [-1, 1]^3 m, any orientation), 500 each, judged by ``jk.fk`` to 1e-6 m and 1e-6 rad
 (``python3 -m bench.wholebody_ik``): G1's ankles and hands, Talos's soles and grippers and
-Solo12's four feet 100%. The neutral start converges for 39% / 28% / 46% of them; of the others
-the first restart for 70% / 82% / 49% (23% / 38% / 45% with the earlier rule: joints uniform
-within the limits, the base placed by one frame), 100 / 89 / 78 LM steps per target on average
-(244 / 187 / 82 before).
+Solo12's four feet 100%, in 0.75 / 0.70 / 0.32 ms per target batched. The neutral start
+converges for 39% / 28% / 46% of them; of the others the first restart for 70% / 82% / 49%
+(23% / 38% / 45% with the earlier rule: joints uniform within the limits, the base placed by
+one frame), 100 / 90 / 78 LM steps per target on average (244 / 187 / 82 before).
 
 Outcomes are returned as codes (:class:`RESULTS`), not raised from inside ``jit``; with
 ``throw=True`` (the default, as in diffrax) :func:`solve_ik` raises :class:`IKError` after the
@@ -446,7 +446,8 @@ def _place(lane: _Lane, begun: jax.Array, starts) -> _Lane:
     Usually a few lanes begin a start in an iteration (the first iteration: all of them); a
     whole-body start is a forward pass and a base fit (about 2.5 us a lane for a G1), so where at
     most :data:`START_SLOTS` lanes begin, only theirs are evaluated (gathered, then scattered
-    back), else every lane's. The same values either way."""
+    back), else every lane's. The same values up to rounding (the two are compiled for different
+    numbers of lanes: a start near the edge of converging can then go either way)."""
     B = begun.shape[0]
 
     def every():
