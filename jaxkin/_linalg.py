@@ -56,7 +56,7 @@ def polar_rotation(M: jax.Array) -> tuple[jax.Array, jax.Array]:
     Scaled Newton iteration ``X <- (z X + X^-T / z) / 2``, ``z = sqrt(|X^-1|_F / |X|_F)`` (Higham),
     a fixed :data:`POLAR_ITERATIONS` steps, ``X^-T`` from the cofactors: elementwise, so under
     ``vmap`` the batch runs as one loop (a batched SVD of 3 x 3 matrices is a LAPACK call per
-    matrix, about 1.6 us each on CPU).
+    matrix, and the restarts' fit runs inside the LM loop).
     """
     dtype = M.dtype
     norm = jnp.sqrt(jnp.sum(M * M))

@@ -276,7 +276,8 @@ WHOLE_BODY_DEFAULTS = {"max_steps": 60, "damping": 1e-1}
 ``posture=``, or free, ball or planar joints): a more cautious first step and twice the steps
 per start. On G1's hands and feet from the neutral configuration these reach 100% of
 ``bench.wholebody_ik``'s 500 targets, where ``max_steps=30, damping=1e-3`` (the arm defaults)
-reach 99.4% (95% of 200 before the restarts' rule of :data:`RESTART_RAMP`)."""
+reach 99.4% (``python3 -m bench.wholebody_ik --robots g1 --max-steps 30 --damping 1e-3``; 95%
+of 200 before the restarts' rule of :data:`RESTART_RAMP`)."""
 
 
 class _Lane(NamedTuple):
@@ -444,10 +445,12 @@ def _place(lane: _Lane, begun: jax.Array, starts) -> _Lane:
     (``starts(job, seed)``, vmapped), inside the loop.
 
     Usually a few lanes begin a start in an iteration (the first iteration: all of them); a
-    whole-body start is a forward pass and a base fit (about 2.5 us a lane for a G1), so where at
-    most :data:`START_SLOTS` lanes begin, only theirs are evaluated (gathered, then scattered
-    back), else every lane's. The same values up to rounding (the two are compiled for different
-    numbers of lanes: a start near the edge of converging can then go either way)."""
+    whole-body start is a forward pass and a base fit, so where at most :data:`START_SLOTS`
+    lanes begin, only theirs are evaluated (gathered, then scattered back), else every lane's
+    (G1's targets: 0.85-0.89 -> 0.74 ms each; ``python3 -m bench.wholebody_ik --robots g1``
+    with and without ``--start-slots 1000000``). The same values up to rounding (the two are
+    compiled for different numbers of lanes: a start near the edge of converging can then go
+    either way)."""
     B = begun.shape[0]
 
     def every():
@@ -994,8 +997,8 @@ RESTART_RAMP = 8
 """Restarts of a floating-base robot's whole-body solve draw each joint from the middle
 ``(s - 1) / RESTART_RAMP`` of its range (start ``s``; the whole range from ``s = 9`` on): the
 first restart at mid-range, later ones spread out (see :func:`_start_fn`). Of 2, 4, 8, 16 and 32,
-8 gave the least time per target over G1, Talos and Solo12 together (``bench.wholebody_ik``'s
-500 targets each, solved with this constant changed; every value solved 100%)."""
+8 gave the least time per target over G1, Talos and Solo12 together (``python3 -m
+bench.wholebody_ik --restart-ramp R``, 500 targets each; every value solved 100%)."""
 
 
 def _start_fn(robot, q0, pool, n, S, dtype, keep_base=True):
